@@ -1,0 +1,157 @@
+"""`arm-sim`: run scenes offline and the tools around the node.
+
+Every refusal is one line on stderr and exit code 2; no tracebacks for bad input.
+Subcommands live beside the code they drive; each module adds its parser in
+`add_parser(subparsers)` and keeps heavy imports (rerun, cyclonedds, scipy) inside
+the functions that need them, so `arm-sim scenes` starts fast.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib
+import json
+import sys
+
+from .model import ParameterError
+from .scene import Scene, SceneError, load_scene, parse_value, preset_names
+
+# Modules that contribute subcommands of their own (each defines add_parser).
+SUBCOMMAND_MODULES: list[str] = []
+
+CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
+               "work", "dissipated", "residual")
+
+
+class UsageError(Exception):
+    """Bad input on the command line; printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UsageError(message)
+
+
+def scene_from_args(args) -> Scene:
+    """The scene named by --scene, with --step and --set applied (shared by subcommands)."""
+    scene = load_scene(args.scene)
+    if getattr(args, "step", None) is not None:
+        scene = scene.replace(step_size=parse_value("step_size", args.step))
+    return scene.with_text_overrides(getattr(args, "set", None) or [])
+
+
+def add_scene_arguments(parser) -> None:
+    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`)")
+    parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scene key, e.g. gravity=0 or constant_torque=1,0")
+
+
+def cmd_scenes(args) -> int:
+    for name in preset_names():
+        print(f"{name:30s} {load_scene(name).description}")
+    return 0
+
+
+class CsvRecorder:
+    """One row per step plus the initial row."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def start(self, sim) -> None:
+        try:
+            self._file = open(self.path, "w", newline="")
+        except OSError as error:
+            raise UsageError(f"cannot write --csv {self.path}: {error.strerror}") from None
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(CSV_COLUMNS)
+        self.step(sim)
+
+    def step(self, sim) -> None:
+        s = sim.sample()
+        self._writer.writerow([repr(v) for v in (s.t, *s.q, *s.qd, *s.tau, s.kinetic, s.potential,
+                                                 s.total, s.work, s.dissipated, s.residual)])
+
+    def finish(self, sim) -> None:
+        self._file.close()
+
+
+# Hooks other modules extend: each takes (args) and returns a recorder or None.
+RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None]
+
+
+def cmd_run(args) -> int:
+    from .simulator import Simulator
+
+    scene = scene_from_args(args)
+    duration = scene.duration if args.duration is None else parse_value("duration", args.duration)
+    scene = scene.replace(duration=duration)
+    scene.steps_for(duration)  # refuse before any file is opened
+    sim = Simulator(scene)
+    recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
+    for recorder in recorders:
+        recorder.start(sim)
+
+    def on_step(s):
+        for recorder in recorders:
+            recorder.step(s)
+
+    try:
+        drift = sim.run(duration, on_step if recorders else None)
+    finally:
+        for recorder in recorders:
+            recorder.finish(sim)
+    result = sim.sample().as_dict() | {"max_abs_energy_drift": drift}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_result(scene, result))
+    return 0
+
+
+def format_result(scene: Scene, r: dict) -> str:
+    def pair(v):
+        return "(" + ", ".join(f"{x:.6f}" for x in v) + ")"
+
+    return "\n".join([
+        f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.integrator}",
+        f"t = {r['t']:.6f} s",
+        f"q = {pair(r['q'])} rad",
+        f"qd = {pair(r['qd'])} rad/s",
+        f"tau = {pair(r['tau'])} N m",
+        f"kinetic {r['kinetic']:.9f} J, potential {r['potential']:.9f} J, total {r['total']:.9f} J",
+        f"actuator work {r['work']:.9f} J, dissipated {r['dissipated']:.9f} J",
+        f"balance residual {r['residual']:.3e} J, max |residual| over the run "
+        f"{r['max_abs_energy_drift']:.9f} J",
+    ])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="arm-sim", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub.add_parser("scenes", help="list the preset scenes").set_defaults(func=cmd_scenes)
+    run = sub.add_parser("run", help="run a scene offline and print the final state and energy")
+    add_scene_arguments(run)
+    run.add_argument("--duration", help="seconds of simulated time (default: the scene's)")
+    run.add_argument("--json", action="store_true", help="print one JSON object")
+    run.add_argument("--csv", metavar="PATH", help="write one row per step")
+    run.set_defaults(func=cmd_run)
+    for name in SUBCOMMAND_MODULES:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        return args.func(args)
+    except (UsageError, SceneError, ParameterError) as error:
+        print(f"arm-sim: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""Planar two-revolute arm: mass matrix, velocity-product and gravity torques, energy.
+
+Conventions (the explainer's): q1 from world +x counter-clockwise, q2 relative to
+link 1, y up, gravity along -y, positive torque counter-clockwise, V = 0 with both
+links horizontal. Plain floats: a 2-DOF arm is far cheaper without numpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import cos, isfinite, sin
+
+PAIR_FIELDS = ("link_lengths", "link_masses", "com_distances", "com_inertias")
+
+
+class ParameterError(ValueError):
+    """A physical parameter set that cannot describe a real arm."""
+
+
+@dataclass(frozen=True)
+class ArmParameters:
+    """Link i: length l_i, mass m_i, centre of mass r_i from its joint, inertia I_i about the COM.
+
+    Defaults are the explainer's uniform rods: 1 m, 1 kg, COM at 0.5 m, I = 1/12 kg m^2.
+    """
+
+    link_lengths: tuple[float, float] = (1.0, 1.0)
+    link_masses: tuple[float, float] = (1.0, 1.0)
+    com_distances: tuple[float, float] = (0.5, 0.5)
+    com_inertias: tuple[float, float] = (1.0 / 12.0, 1.0 / 12.0)
+
+    def __post_init__(self):
+        for name in PAIR_FIELDS:
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 2:
+                raise ParameterError(f"{name} needs two values (one per link), got {len(value)}")
+            if not all(isfinite(v) for v in value):
+                raise ParameterError(f"{name} must be finite, got {list(value)}")
+            object.__setattr__(self, name, value)
+        for name, test, what in (
+            ("link_lengths", lambda v: v > 0, "positive"),
+            ("link_masses", lambda v: v > 0, "positive"),
+            ("com_inertias", lambda v: v >= 0, "non-negative"),
+        ):
+            for i, v in enumerate(getattr(self, name)):
+                if not test(v):
+                    raise ParameterError(f"{name}[{i}] = {v} is impossible: it must be {what}")
+        # det M(q2) is smallest at full extension or fold (cos q2 = +-1); a set whose
+        # determinant vanishes there has a singular mass matrix and cannot be simulated.
+        a, b, d = self.inertia_coefficients
+        det_min = a * d - d * d - b * b
+        if not det_min > 1e-12 * a * d:
+            raise ParameterError(
+                "the mass matrix becomes singular at some elbow angle "
+                f"(min det M = {det_min:.3g}); link 2 needs mass away from the elbow axis or inertia")
+
+    @property
+    def inertia_coefficients(self) -> tuple[float, float, float]:
+        """(a, b, d) with M11 = a + 2b cos q2, M12 = d + b cos q2, M22 = d."""
+        (l1, _), (m1, m2), (r1, r2), (i1, i2) = (
+            self.link_lengths, self.link_masses, self.com_distances, self.com_inertias)
+        d = i2 + m2 * r2 * r2
+        a = i1 + m1 * r1 * r1 + m2 * l1 * l1 + d
+        b = m2 * l1 * r2
+        return a, b, d
+
+    @property
+    def gravity_coefficients(self) -> tuple[float, float]:
+        """(k1, k2) with V = gravity (k1 sin q1 + k2 sin(q1 + q2))."""
+        (l1, _), (m1, m2), (r1, r2) = self.link_lengths, self.link_masses, self.com_distances
+        return m1 * r1 + m2 * l1, m2 * r2
+
+
+def mass_matrix(arm: ArmParameters, q):
+    """(M11, M12, M22) of the symmetric joint-space mass matrix."""
+    a, b, d = arm.inertia_coefficients
+    c2 = cos(q[1])
+    return a + 2.0 * b * c2, d + b * c2, d
+
+
+def velocity_torque(arm: ArmParameters, q, qd):
+    """c(q, qd): the Coriolis and centrifugal torques."""
+    _, b, _ = arm.inertia_coefficients
+    h = b * sin(q[1])
+    return -h * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]), h * qd[0] * qd[0]
+
+
+def gravity_torque(arm: ArmParameters, q, gravity: float):
+    """g(q) = dV/dq for gravity magnitude `gravity` along -y."""
+    k1, k2 = arm.gravity_coefficients
+    g2 = gravity * k2 * cos(q[0] + q[1])
+    return gravity * k1 * cos(q[0]) + g2, g2
+
+
+def kinetic_energy(arm: ArmParameters, q, qd) -> float:
+    m11, m12, m22 = mass_matrix(arm, q)
+    return 0.5 * (m11 * qd[0] * qd[0] + 2.0 * m12 * qd[0] * qd[1] + m22 * qd[1] * qd[1])
+
+
+def potential_energy(arm: ArmParameters, q, gravity: float) -> float:
+    k1, k2 = arm.gravity_coefficients
+    return gravity * (k1 * sin(q[0]) + k2 * sin(q[0] + q[1]))
+
+
+def solve_mass_matrix(m11: float, m12: float, m22: float, f1: float, f2: float):
+    """Solve M x = f by the LDL^T (square-root-free Cholesky) factors of the SPD matrix."""
+    l21 = m12 / m11
+    x2 = (f2 - l21 * f1) / (m22 - l21 * m12)
+    return f1 / m11 - l21 * x2, x2
+
+
+def forward_dynamics(arm: ArmParameters, q, qd, torque=(0.0, 0.0), gravity: float = 0.0,
+                     damping: float = 0.0):
+    """qdd from M(q) qdd = tau - c(q, qd) - g(q) - d qd."""
+    c1, c2 = velocity_torque(arm, q, qd)
+    g1, g2 = gravity_torque(arm, q, gravity)
+    f1 = torque[0] - c1 - g1 - damping * qd[0]
+    f2 = torque[1] - c2 - g2 - damping * qd[1]
+    return solve_mass_matrix(*mass_matrix(arm, q), f1, f2)
+
+
+def inverse_dynamics(arm: ArmParameters, q, qd, qdd, gravity: float = 0.0, damping: float = 0.0):
+    """tau = M(q) qdd + c(q, qd) + g(q) + d qd."""
+    m11, m12, m22 = mass_matrix(arm, q)
+    c1, c2 = velocity_torque(arm, q, qd)
+    g1, g2 = gravity_torque(arm, q, gravity)
+    return (m11 * qdd[0] + m12 * qdd[1] + c1 + g1 + damping * qd[0],
+            m12 * qdd[0] + m22 * qdd[1] + c2 + g2 + damping * qd[1])
+
+
+def link_points(arm: ArmParameters, q):
+    """Base, elbow and tip positions (x, y), y up."""
+    l1, l2 = arm.link_lengths
+    ex, ey = l1 * cos(q[0]), l1 * sin(q[0])
+    return (0.0, 0.0), (ex, ey), (ex + l2 * cos(q[0] + q[1]), ey + l2 * sin(q[0] + q[1]))

@@ -1,0 +1,164 @@
+"""Scenes: initial state, physical parameters, the effects they call for, and a torque policy.
+
+A scene is data: presets live in config/scenes/*.yaml. Every value passes through
+`Scene.replace`, which validates it, so a scene that exists is one that can be simulated.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass, fields, replace as dataclass_replace
+from math import isfinite
+from pathlib import Path
+
+import yaml
+
+from .dynamics import POLICIES
+from .integrators import INTEGRATORS
+from .model import PAIR_FIELDS, ArmParameters, ParameterError
+
+
+class SceneError(ValueError):
+    """A scene or override that cannot be simulated; the message says what and why."""
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str = "release"
+    description: str = ""
+    initial_positions: tuple[float, float] = (0.0, 0.0)
+    initial_velocities: tuple[float, float] = (0.0, 0.0)
+    gravity: float = 9.81            # magnitude along -y; 0 = no gravity effect
+    damping: float = 0.0             # D = damping * I; 0 = no damping effect
+    link_lengths: tuple[float, float] = ArmParameters.link_lengths
+    link_masses: tuple[float, float] = ArmParameters.link_masses
+    com_distances: tuple[float, float] = ArmParameters.com_distances
+    com_inertias: tuple[float, float] = ArmParameters.com_inertias
+    policy: str = "zero"
+    constant_torque: tuple[float, float] = (0.0, 0.0)
+    integrator: str = "rk4"
+    step_size: float = 0.01
+    duration: float = 0.5
+
+    def __post_init__(self):
+        for f in fields(self):
+            object.__setattr__(self, f.name, _coerce(f.name, FIELD_KINDS[f.name], getattr(self, f.name)))
+        if self.gravity < 0:
+            raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
+        if self.damping < 0:
+            raise SceneError(f"damping = {self.damping} would add energy; it must be >= 0")
+        if self.policy not in POLICIES:
+            raise SceneError(f"policy {self.policy!r} is unknown; choose one of {', '.join(POLICIES)}")
+        if self.integrator not in INTEGRATORS:
+            raise SceneError(f"integrator {self.integrator!r} is unknown; choose one of "
+                             f"{', '.join(INTEGRATORS)}")
+        if not self.step_size > 0:
+            raise SceneError(f"step_size = {self.step_size} must be positive")
+        if not self.duration >= 0:
+            raise SceneError(f"duration = {self.duration} must not be negative")
+        try:
+            self.arm
+        except ParameterError as error:
+            raise SceneError(str(error)) from None
+
+    @property
+    def arm(self) -> ArmParameters:
+        return ArmParameters(**{name: getattr(self, name) for name in PAIR_FIELDS})
+
+    def replace(self, **overrides) -> "Scene":
+        unknown = sorted(set(overrides) - set(FIELD_KINDS))
+        if unknown:
+            raise SceneError(f"unknown scene key {unknown[0]!r}; known keys: {', '.join(FIELD_KINDS)}")
+        return dataclass_replace(self, **overrides)
+
+    def with_text_overrides(self, assignments) -> "Scene":
+        """Apply `key=value` strings as the command line gives them (pairs as `1,0`)."""
+        overrides = {}
+        for text in assignments:
+            key, sep, value = text.partition("=")
+            key = key.strip()
+            if not sep or not key:
+                raise SceneError(f"--set {text!r} is not of the form key=value")
+            if key not in FIELD_KINDS:
+                raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+            overrides[key] = parse_value(key, value)
+        return self.replace(**overrides)
+
+    def steps_for(self, duration: float, step_size: float | None = None) -> int:
+        """The whole number of steps that covers `duration`; anything else is refused."""
+        h = self.step_size if step_size is None else step_size
+        if not (isfinite(duration) and duration >= 0):
+            raise SceneError(f"duration = {duration} must be a finite, non-negative number of seconds")
+        steps = round(duration / h)
+        if abs(steps * h - duration) > 1e-9 * max(1.0, duration):
+            raise SceneError(f"duration {duration} s is not a whole number of steps of {h} s "
+                             f"({duration / h:.6g} steps)")
+        return steps
+
+
+FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
+                        "float" if f.type == "float" else "str") for f in fields(Scene)}
+
+
+def _coerce(name: str, kind: str, value):
+    if kind == "str":
+        if not isinstance(value, str):
+            raise SceneError(f"{name} must be text, got {value!r}")
+        return value
+    if kind == "pair":
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+            raise SceneError(f"{name} needs two numbers (one per joint or link), got {value!r}")
+        return tuple(_coerce(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if not isfinite(value):
+        raise SceneError(f"{name} = {value} is not finite")
+    return value
+
+
+def parse_value(key: str, text: str):
+    kind = FIELD_KINDS[key]
+    try:
+        if kind == "pair":
+            return tuple(float(v) for v in text.split(","))
+        if kind == "float":
+            return float(text)
+    except ValueError:
+        raise SceneError(f"{key}={text!r} is malformed: expected "
+                         f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
+    return text
+
+
+def scene_dirs() -> list[Path]:
+    """Where presets live: the source tree, then where pip or colcon install data_files."""
+    here = Path(__file__).resolve().parent
+    candidates = [Path(os.environ["ARM_SIM_SCENES"])] if os.environ.get("ARM_SIM_SCENES") else []
+    candidates += [here.parent / "config" / "scenes",
+                   Path(sys.prefix) / "share" / "arm_sim_ros" / "config" / "scenes"]
+    try:  # a colcon install puts them in the package's share directory
+        from ament_index_python.packages import get_package_share_directory
+        candidates.append(Path(get_package_share_directory("arm_sim_ros")) / "config" / "scenes")
+    except Exception:
+        pass
+    return [p for p in candidates if p.is_dir()]
+
+
+def preset_names() -> list[str]:
+    dirs = scene_dirs()
+    return sorted({p.stem for d in dirs[:1] for p in d.glob("*.yaml")})
+
+
+def load_scene(name: str = "release") -> Scene:
+    for directory in scene_dirs():
+        path = directory / f"{name}.yaml"
+        if path.is_file():
+            data = yaml.safe_load(path.read_text()) or {}
+            if not isinstance(data, dict):
+                raise SceneError(f"scene file {path} must hold a mapping of keys to values")
+            try:
+                return Scene(name=name).replace(**data)
+            except SceneError as error:
+                raise SceneError(f"scene {name!r} ({path}): {error}") from None
+    known = ", ".join(preset_names()) or "none found"
+    raise SceneError(f"unknown scene {name!r}; presets: {known}")
