@@ -1,0 +1,287 @@
+"""ROS 2 Jazzy messages as cyclonedds IDL types, laid out exactly as rmw_cyclonedds puts them
+on the wire, plus the QoS profiles and discovery configuration it uses.
+
+What makes a real rclpy node on rmw_cyclonedds talk to these (see DESIGN.md, "Wire facts"):
+type names `<pkg>::msg::dds_::<Type>_`, final keyless structs in XCDR1, topics `rt/<name>`,
+the ROS default QoS (reliable, volatile, keep-last 10), USER_DATA `typehash=RIHS01_…;` on
+endpoints and `enclave=/;` on the participant, and the same discovery settings, built here
+from ROS_DOMAIN_ID / ROS_AUTOMATIC_DISCOVERY_RANGE / ROS_STATIC_PEERS / CYCLONEDDS_URI.
+Messages are Python dataclasses: pass lists (not numpy arrays) to sequence fields. (No
+`from __future__ import annotations` here: cyclonedds resolves the field types at runtime.)
+"""
+
+import os
+from dataclasses import dataclass, field
+from xml.sax.saxutils import quoteattr
+
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.annotations import final
+from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.util import duration
+
+
+# --- builtin_interfaces / std_msgs -------------------------------------------------------
+
+@final
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces.msg.dds_.Time_"):
+    sec: int32 = 0
+    nanosec: uint32 = 0
+
+
+@final
+@dataclass
+class Header(IdlStruct, typename="std_msgs.msg.dds_.Header_"):
+    stamp: Time = field(default_factory=Time)
+    frame_id: str = ""
+
+
+@final
+@dataclass
+class MultiArrayDimension(IdlStruct, typename="std_msgs.msg.dds_.MultiArrayDimension_"):
+    label: str = ""
+    size: uint32 = 0
+    stride: uint32 = 0
+
+
+@final
+@dataclass
+class MultiArrayLayout(IdlStruct, typename="std_msgs.msg.dds_.MultiArrayLayout_"):
+    dim: sequence[MultiArrayDimension] = field(default_factory=list)
+    data_offset: uint32 = 0
+
+
+@final
+@dataclass
+class Float64MultiArray(IdlStruct, typename="std_msgs.msg.dds_.Float64MultiArray_"):
+    layout: MultiArrayLayout = field(default_factory=MultiArrayLayout)
+    data: sequence[float64] = field(default_factory=list)
+
+
+# --- sensor_msgs ---------------------------------------------------------------------------
+
+@final
+@dataclass
+class JointState(IdlStruct, typename="sensor_msgs.msg.dds_.JointState_"):
+    header: Header = field(default_factory=Header)
+    name: sequence[str] = field(default_factory=list)
+    position: sequence[float64] = field(default_factory=list)
+    velocity: sequence[float64] = field(default_factory=list)
+    effort: sequence[float64] = field(default_factory=list)
+
+
+# --- diagnostic_msgs -----------------------------------------------------------------------
+
+@final
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs.msg.dds_.KeyValue_"):
+    key: str = ""
+    value: str = ""
+
+
+@final
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs.msg.dds_.DiagnosticStatus_"):
+    OK = 0      # level constants, as in DiagnosticStatus.msg (class attributes, not fields)
+    WARN = 1
+    ERROR = 2
+    STALE = 3
+    level: uint8 = 0
+    name: str = ""
+    message: str = ""
+    hardware_id: str = ""
+    values: sequence[KeyValue] = field(default_factory=list)
+
+
+@final
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs.msg.dds_.DiagnosticArray_"):
+    header: Header = field(default_factory=Header)
+    status: sequence[DiagnosticStatus] = field(default_factory=list)
+
+
+# --- rmw_dds_common: what `ros2 node list` reads ------------------------------------------
+
+@final
+@dataclass
+class Gid(IdlStruct, typename="rmw_dds_common.msg.dds_.Gid_"):
+    data: array[uint8, 16] = field(default_factory=lambda: [0] * 16)
+
+
+@final
+@dataclass
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common.msg.dds_.NodeEntitiesInfo_"):
+    node_namespace: bounded_str[256] = "/"
+    node_name: bounded_str[256] = ""
+    reader_gid_seq: sequence[Gid] = field(default_factory=list)
+    writer_gid_seq: sequence[Gid] = field(default_factory=list)
+
+
+@final
+@dataclass
+class ParticipantEntitiesInfo(IdlStruct,
+                              typename="rmw_dds_common.msg.dds_.ParticipantEntitiesInfo_"):
+    gid: Gid = field(default_factory=Gid)
+    node_entities_info_seq: sequence[NodeEntitiesInfo] = field(default_factory=list)
+
+
+# ROS interface name ("pkg/msg/Type") of each wire type, for rosbags and the type hash.
+ROS_TYPE_NAMES = {
+    Time: "builtin_interfaces/msg/Time",
+    Header: "std_msgs/msg/Header",
+    MultiArrayDimension: "std_msgs/msg/MultiArrayDimension",
+    MultiArrayLayout: "std_msgs/msg/MultiArrayLayout",
+    Float64MultiArray: "std_msgs/msg/Float64MultiArray",
+    JointState: "sensor_msgs/msg/JointState",
+    KeyValue: "diagnostic_msgs/msg/KeyValue",
+    DiagnosticStatus: "diagnostic_msgs/msg/DiagnosticStatus",
+    DiagnosticArray: "diagnostic_msgs/msg/DiagnosticArray",
+    Gid: "rmw_dds_common/msg/Gid",
+    NodeEntitiesInfo: "rmw_dds_common/msg/NodeEntitiesInfo",
+    ParticipantEntitiesInfo: "rmw_dds_common/msg/ParticipantEntitiesInfo",
+}
+
+# RIHS01 type hashes (REP 2011) as rosidl computes them for Jazzy; test_ros_messages checks
+# each against the rosbags library, so the runtime needs no rosbags import.
+TYPE_HASHES = {
+    "builtin_interfaces/msg/Time":
+        "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197",
+    "std_msgs/msg/Header":
+        "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01",
+    "std_msgs/msg/Float64MultiArray":
+        "RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f",
+    "sensor_msgs/msg/JointState":
+        "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+    "diagnostic_msgs/msg/DiagnosticArray":
+        "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+    "rmw_dds_common/msg/ParticipantEntitiesInfo":
+        "RIHS01_e725f4a506958c79f95dd693b965722c57b19cd18e7eff984f49561b93dc985d",
+}
+
+
+def ros_topic(name: str) -> str:
+    """The DDS topic rmw gives a ROS topic: `joint_states` -> `rt/joint_states`."""
+    return "rt/" + name.lstrip("/")
+
+
+# --- QoS -----------------------------------------------------------------------------------
+
+def _endpoint_qos(message_type, *policies) -> Qos:
+    user_data = f"typehash={TYPE_HASHES[ROS_TYPE_NAMES[message_type]]};".encode()
+    return Qos(*policies, Policy.Userdata(user_data))
+
+
+def default_qos(message_type, depth: int = 10) -> Qos:
+    """rmw_cyclonedds' mapping of the ROS default profile: reliable, volatile, keep-last 10."""
+    return _endpoint_qos(message_type,
+                         Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
+                         Policy.Durability.Volatile,
+                         Policy.History.KeepLast(depth))
+
+
+def discovery_info_qos() -> Qos:
+    """`ros_discovery_info`: reliable, transient-local, keep-last 1 (late joiners see the node)."""
+    return _endpoint_qos(ParticipantEntitiesInfo,
+                         Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
+                         Policy.Durability.TransientLocal,
+                         Policy.History.KeepLast(1))
+
+
+PARTICIPANT_QOS = Qos(Policy.Userdata(b"enclave=/;"))
+
+
+# --- discovery configuration, as rmw_cyclonedds builds it ---------------------------------
+
+DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
+
+
+class DiscoveryError(ValueError):
+    """An environment variable that rmw would also reject."""
+
+
+def domain_id_from_env(env=None) -> int:
+    text = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return 0
+    try:
+        value = int(text)
+    except ValueError:
+        raise DiscoveryError(f"ROS_DOMAIN_ID={text!r} is not an integer") from None
+    if not 0 <= value <= 232:
+        raise DiscoveryError(f"ROS_DOMAIN_ID={value} is outside 0..232")
+    return value
+
+
+def discovery_range_from_env(env=None) -> str:
+    """Jazzy's rules: unset means SUBNET, ROS_LOCALHOST_ONLY=1 forces LOCALHOST, and an
+    unknown value falls back to LOCALHOST (rcl warns and does the same)."""
+    env = os.environ if env is None else env
+    if env.get("ROS_LOCALHOST_ONLY", "") == "1":
+        return "LOCALHOST"
+    text = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip()
+    if not text:
+        return "SUBNET"
+    return text if text in DISCOVERY_RANGES else "LOCALHOST"
+
+
+def discovery_config(env=None) -> str:
+    """Cyclone configuration for this process, built as rmw_cyclonedds' check_create_domain
+    builds it: a discovery fragment, then CYCLONEDDS_URI (later fragments override)."""
+    env = os.environ if env is None else env
+    scope = discovery_range_from_env(env)
+    peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
+    add_localhost = scope == "LOCALHOST"
+    add_peers = scope in ("SUBNET", "LOCALHOST")
+    no_multicast = scope in ("LOCALHOST", "OFF")
+    fragment = ""
+    if add_localhost or (add_peers and peers) or no_multicast:
+        fragment = "<CycloneDDS><Domain>"
+        if no_multicast:
+            fragment += "<General><AllowMulticast>false</AllowMulticast></General>"
+        if scope == "OFF":
+            # Only a participant with this exact tag (this pid) could discover us.
+            fragment += (f"<Discovery><ParticipantIndex>none</ParticipantIndex>"
+                         f"<Tag>ros_discovery_off_{os.getpid()}</Tag>")
+        else:
+            fragment += ("<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+                         "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>")
+        listed = (["localhost"] if add_localhost else []) + (peers if add_peers else [])
+        if listed:
+            fragment += ("<Peers>" + "".join(f"<Peer address={quoteattr(p)}/>" for p in listed)
+                         + "</Peers>")
+        fragment += "</Discovery></Domain></CycloneDDS>,"
+    return fragment + env.get("CYCLONEDDS_URI", "")
+
+
+LOOPBACK_CONFIG = ("<CycloneDDS><Domain><General><Interfaces>"
+                   "<NetworkInterface address=\"127.0.0.1\"/></Interfaces>"
+                   "<AllowMulticast>false</AllowMulticast></General>"
+                   "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+                   "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+                   "<Peers><Peer address=\"127.0.0.1\"/></Peers></Discovery></Domain></CycloneDDS>")
+"""Loopback only, for tests and benchmarks: never leaves the machine, never meets the LAN."""
+
+_configured_domains: dict[int, Domain] = {}
+
+
+def make_participant(domain_id: int | None = None, config: str | None = None,
+                     env=None) -> DomainParticipant:
+    """A participant configured the way rmw_cyclonedds would configure it from `env`
+    (default os.environ), or with an explicit Cyclone `config` (e.g. LOOPBACK_CONFIG).
+
+    Cyclone reads a domain's configuration once, when the first participant in it is created;
+    the Domain object is kept here so later participants in this process share it.
+    """
+    if domain_id is None:
+        domain_id = domain_id_from_env(env)
+    if domain_id not in _configured_domains:
+        text = discovery_config(env) if config is None else config
+        _configured_domains[domain_id] = Domain(domain_id, text or None)
+    return DomainParticipant(domain_id, qos=PARTICIPANT_QOS)
+
+
+def gid(entity) -> Gid:
+    """rmw's gid of a DDS entity: its 16-byte GUID."""
+    return Gid(data=list(entity.guid.bytes))
