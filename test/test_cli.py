@@ -1,0 +1,110 @@
+"""`arm-sim scenes` and `arm-sim run`: outputs, overrides, and one-line refusals with exit code 2."""
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+
+from arm_sim_ros import cli
+from arm_sim_ros.scene import load_scene, preset_names
+from arm_sim_ros.simulator import Simulator
+
+PRESETS = {"release", "shoulder_torque_no_gravity", "gravity_compensation_at_rest",
+           "moving_gravity_compensation", "moving_frozen_gravity", "damped_release",
+           "downward_equilibrium"}
+
+
+def run_cli(capsys, *argv):
+    code = cli.main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_scenes_lists_the_seven_presets_with_descriptions(capsys):
+    code, out, _ = run_cli(capsys, "scenes")
+    assert code == 0
+    assert set(preset_names()) == PRESETS
+    for name in PRESETS:
+        line = next(l for l in out.splitlines() if l.split()[0] == name)
+        assert load_scene(name).description in line
+
+
+def test_run_json_has_the_documented_keys_and_values(capsys):
+    code, out, _ = run_cli(capsys, "run", "--scene", "release", "--json")
+    assert code == 0
+    result = json.loads(out)
+    assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
+                           "residual", "max_abs_energy_drift"}
+    assert result["t"] == 0.5
+    assert [f"{x:.6f}" for x in result["q"]] == ["-1.122654", "0.593820"]
+
+
+def test_run_overrides_turn_release_into_the_shoulder_torque_scene(capsys):
+    code, out, _ = run_cli(capsys, "run", "--json", "--set", "gravity=0", "--set", "policy=constant",
+                           "--set", "constant_torque=1,0")
+    assert code == 0
+    sim = Simulator(load_scene("shoulder_torque_no_gravity"))
+    sim.run(0.5)
+    assert json.loads(out)["q"] == list(sim.state[:2])
+
+
+def test_run_step_and_duration_from_the_command_line(capsys):
+    code, out, _ = run_cli(capsys, "run", "--step", "0.005", "--duration", "2", "--json")
+    assert f"{json.loads(out)['max_abs_energy_drift']:.9f}" == "0.000011084"
+
+
+def test_run_prints_state_and_energy(capsys):
+    code, out, _ = run_cli(capsys, "run", "--scene", "damped_release")
+    assert code == 0
+    for text in ("t = 2.000000 s", "q = (", "qd = (", "tau = (0.000000, 0.000000)", "dissipated",
+                 "balance residual"):
+        assert text in out
+
+
+def test_csv_has_initial_row_plus_one_per_step(capsys, tmp_path):
+    path = tmp_path / "run.csv"
+    code, _, _ = run_cli(capsys, "run", "--scene", "damped_release", "--csv", str(path))
+    assert code == 0
+    rows = list(csv.DictReader(path.open()))
+    assert list(rows[0]) == list(cli.CSV_COLUMNS)
+    assert len(rows) == 201
+    assert float(rows[0]["t"]) == 0.0 and float(rows[-1]["t"]) == 2.0
+    last = rows[-1]
+    assert float(last["total"]) == pytest.approx(float(last["kinetic"]) + float(last["potential"]), abs=1e-12)
+    assert float(last["dissipated"]) > 0
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["run", "--scene", "nope"], "unknown scene 'nope'"),
+    (["run", "--set", "bogus=1"], "unknown scene key 'bogus'"),
+    (["run", "--set", "gravity"], "not of the form key=value"),
+    (["run", "--set", "gravity=abc"], "gravity='abc' is malformed"),
+    (["run", "--set", "constant_torque=1"], "constant_torque needs two numbers"),
+    (["run", "--set", "damping=inf"], "damping = inf is not finite"),
+    (["run", "--set", "gravity=nan"], "gravity = nan is not finite"),
+    (["run", "--step", "0"], "step_size = 0.0 must be positive"),
+    (["run", "--step", "-0.01"], "must be positive"),
+    (["run", "--duration", "0.503"], "not a whole number of steps"),
+    (["run", "--set", "link_masses=0,1"], "link_masses[0] = 0.0 is impossible"),
+    (["run", "--set", "link_lengths=1,-2"], "link_lengths[1] = -2.0 is impossible"),
+    (["run", "--set", "com_inertias=-1,0.1"], "com_inertias[0] = -1.0 is impossible"),
+    (["run", "--set", "policy=teleport"], "policy 'teleport' is unknown"),
+    (["run", "--set", "damping=-1"], "would add energy"),
+    (["run", "--csv", "/nonexistent-dir/x.csv"], "cannot write --csv"),
+    (["frobnicate"], "invalid choice"),
+])
+def test_bad_input_is_one_line_on_stderr_with_exit_code_2(capsys, argv, fragment):
+    code, out, err = run_cli(capsys, *argv)
+    assert code == 2
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1
+    assert fragment in err
+
+
+def test_console_script_refuses_without_traceback():
+    proc = subprocess.run([sys.executable, "-m", "arm_sim_ros.cli", "run", "--set", "link_masses=-1,1"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("arm-sim: error: link_masses[0] = -1.0 is impossible")
