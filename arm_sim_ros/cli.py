@@ -17,7 +17,7 @@ from .model import ParameterError
 from .scene import Scene, SceneError, load_scene, parse_value, preset_names
 
 # Modules that contribute subcommands of their own (each defines add_parser).
-SUBCOMMAND_MODULES: list[str] = []
+SUBCOMMAND_MODULES: list[str] = ["arm_sim_ros.record"]
 
 CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
                "work", "dissipated", "residual")
@@ -78,7 +78,9 @@ class CsvRecorder:
 
 
 # Hooks other modules extend: each takes (args) and returns a recorder or None.
-RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None]
+RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None,
+                 lambda args: importlib.import_module("arm_sim_ros.bag").run_recorder(args)
+                 if args.bag else None]
 
 
 def cmd_run(args) -> int:
@@ -136,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--duration", help="seconds of simulated time (default: the scene's)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.add_argument("--csv", metavar="PATH", help="write one row per step")
+    run.add_argument("--bag", metavar="DIR", help="write a rosbag2 (MCAP) recording of the topics")
+    run.add_argument("--publish-rate", type=float, default=100.0, metavar="HZ",
+                     help="JointState rate in the --bag recording (default 100 Hz)")
     run.set_defaults(func=cmd_run)
     for name in SUBCOMMAND_MODULES:
         importlib.import_module(name).add_parser(sub)

@@ -1,0 +1,197 @@
+"""`arm-sim record [--topics NAME:TYPE ...] DIR`: a rosbag2 recorder for machines without ROS.
+
+It joins the ROS 2 wire through the dds transport (the same discovery settings as
+rmw_cyclonedds, from ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE, ROS_STATIC_PEERS and
+CYCLONEDDS_URI), subscribes to the node's topics and any other JointState or
+Float64MultiArray topic named, and writes what arrives as `ros2 bag record` would, except
+that bag time is when the publisher sent each message (its DDS source timestamp) rather
+than when it arrived: on one machine the two differ by the ~0.3 ms transport latency, and
+the send time keeps the publishing cadence that `ros2 bag play` reproduces. Messages keep
+their own header stamps; each topic carries the QoS its publishers offered, as discovery
+reports it. The recording stops at Ctrl-C,
+SIGTERM or --duration, and always closes the bag, so every message taken is kept.
+"""
+from __future__ import annotations
+
+import signal
+import time
+
+DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
+                  "/joint_torque_commands": "std_msgs/msg/Float64MultiArray",
+                  "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+EXTRA_TYPES = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray")
+POLL_SECONDS = 0.1  # how soon a stop request is noticed
+
+
+def parse_topic(text: str) -> tuple[str, str]:
+    """`name:type`, type as `sensor_msgs/msg/JointState` or just `JointState`."""
+    from .cli import UsageError
+
+    name, sep, short = text.rpartition(":")
+    matches = [t for t in EXTRA_TYPES if short in (t, t.rsplit("/", 1)[-1])]
+    if not sep or not name.strip("/") or not matches:
+        raise UsageError(f"--topics {text!r} must be NAME:TYPE with TYPE one of "
+                         f"{', '.join(EXTRA_TYPES)} (or its last part, e.g. JointState)")
+    return "/" + name.strip("/"), matches[0]
+
+
+class TopicRecorder:
+    """Readers for `topics` on `participant`, writing each sample into a BagWriter.
+
+    A topic enters the bag with its first message, when its publishers have certainly
+    been discovered, so the offered QoS written is theirs.
+    """
+
+    def __init__(self, participant, topics: dict[str, str], writer):
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        from . import ros_messages as wire
+
+        self.writer = writer
+        self.topics = topics
+        self._offers: dict[str, dict] = {}   # DDS topic -> {publication key: Qos}
+        self._publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+        self._waitset = WaitSet(participant)
+        self._readers = {}
+        wire_types = {ros: cls for cls, ros in wire.ROS_TYPE_NAMES.items()}
+        any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
+        for name, msgtype in topics.items():
+            cls = wire_types[msgtype]
+            # Keep-all and reliable: a slow disk holds the writers back instead of dropping.
+            qos = wire.default_qos(cls) + Qos(Policy.History.KeepAll)
+            reader = DataReader(participant, Topic(participant, wire.ros_topic(name), cls), qos=qos)
+            self._waitset.attach(ReadCondition(reader, any_sample))
+            self._readers[name] = reader
+
+    def poll(self, timeout: float = POLL_SECONDS) -> int:
+        """Wait up to `timeout` s for data, then write everything available; returns the count."""
+        self._waitset.wait(int(timeout * 1e9))
+        return self.drain()
+
+    def drain(self) -> int:
+        from cyclonedds.internal import InvalidSample
+
+        written = 0
+        for name, reader in self._readers.items():
+            samples = [s for s in reader.take(N=1000) if not isinstance(s, InvalidSample)]
+            if not samples:
+                continue
+            if name not in self.writer:
+                self._add(name)
+            for sample in samples:
+                self.writer.write(name, sample.sample_info.source_timestamp,
+                                  self._message(name, sample))
+            written += len(samples)
+        return written
+
+    def _message(self, name, sample):
+        from .bag import message_from
+
+        return message_from(self.topics[name], sample)
+
+    def _add(self, name: str) -> None:
+        from .bag import NODE_QOS
+        from .ros_messages import ros_topic
+
+        for endpoint in self._publications.take(N=10_000):
+            self._offers.setdefault(endpoint.topic_name, {})[endpoint.key] = endpoint.qos
+        offers = [offer_from_dds(q) for q in self._offers.get(ros_topic(name), {}).values()]
+        self.writer.add_topic(name, self.topics[name], offers or [NODE_QOS])
+
+
+def offer_from_dds(qos):
+    """A discovered writer's DDS QoS as the ROS graph (and so rosbag2) reports it."""
+    from cyclonedds.core import dds_infinity
+    from cyclonedds.qos import Policy
+
+    from .bag import INFINITE, QosLiveliness, QosTime, offered_qos
+
+    def duration(policy, attribute):  # an absent policy means infinite, as in DDS
+        ns = dds_infinity if policy is None else getattr(policy, attribute)
+        return INFINITE if ns >= dds_infinity else QosTime(ns // 10**9, ns % 10**9)
+
+    liveliness = qos[Policy.Liveliness]
+    manual = isinstance(liveliness, Policy.Liveliness.ManualByTopic)
+    return offered_qos(
+        "best_effort" if qos[Policy.Reliability] == Policy.Reliability.BestEffort else "reliable",
+        "transient_local" if qos[Policy.Durability] == Policy.Durability.TransientLocal
+        else "volatile",
+        deadline=duration(qos[Policy.Deadline], "deadline"),
+        lifespan=duration(qos[Policy.Lifespan], "lifespan"),
+        liveliness=QosLiveliness.MANUAL_BY_TOPIC if manual else QosLiveliness.AUTOMATIC,
+        lease=duration(liveliness, "lease_duration"))
+
+
+class StopRequest:
+    """Set by SIGINT / SIGTERM: the loop finishes its write and closes the bag."""
+
+    def __init__(self):
+        self.requested = False
+
+    def __call__(self, signum, frame):
+        self.requested = True
+
+    def install(self):
+        return {sig: signal.signal(sig, self) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def record(path, topics: dict[str, str], participant, duration: float | None = None,
+           stop=None) -> dict[str, int]:
+    """Record until `stop.requested` or `duration` wall seconds; returns messages per topic."""
+    from .bag import BagWriter
+
+    stop = stop or StopRequest()
+    end = None if duration is None else time.monotonic() + duration
+    with BagWriter(path) as writer:
+        recorder = TopicRecorder(participant, topics, writer)
+        while not stop.requested and (end is None or time.monotonic() < end):
+            remaining = POLL_SECONDS if end is None else max(0.0, end - time.monotonic())
+            recorder.poll(min(POLL_SECONDS, remaining))
+        recorder.drain()
+        return dict(writer.counts)
+
+
+def cmd_record(args) -> int:
+    import sys
+    from pathlib import Path
+
+    from .bag import BagError
+    from .ros_messages import DiscoveryError, make_participant
+
+    topics = dict(DEFAULT_TOPICS)
+    topics.update(parse_topic(t) for text in args.topics or [] for t in text.split(",") if t)
+    if args.duration is not None and not args.duration > 0:
+        raise BagError(f"--duration {args.duration} must be a positive number of seconds")
+    if Path(args.dir).exists():  # refused before joining the network
+        raise BagError(f"{args.dir} exists already; a recording never overwrites one")
+    try:
+        participant = make_participant()
+    except DiscoveryError as error:
+        raise BagError(str(error)) from None
+    stop = StopRequest()
+    previous = stop.install()
+    try:
+        print(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)", file=sys.stderr,
+              flush=True)
+        counts = record(args.dir, topics, participant, args.duration, stop)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    summary = ", ".join(f"{topic} {n}" for topic, n in counts.items()) or "no messages"
+    print(f"wrote {args.dir}: {summary}", flush=True)
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "record", help="record the arm's topics from the ROS 2 wire into a rosbag2 (MCAP)")
+    parser.add_argument("dir", metavar="DIR", help="bag directory to create (must not exist)")
+    parser.add_argument("--topics", action="append", metavar="NAME:TYPE[,NAME:TYPE...]",
+                        help="more topics to record (repeatable, or comma-separated), e.g. "
+                             "/target:JointState,/effort:std_msgs/msg/Float64MultiArray")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.set_defaults(func=cmd_record)

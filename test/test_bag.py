@@ -1,0 +1,303 @@
+"""rosbag2 recordings: `arm-sim run --bag` against the core, `arm-sim record` against what a
+participant published on the ROS 2 wire, and an interrupted recorder's bag.
+
+DDS here is loopback only (interface 127.0.0.1, no multicast, peer 127.0.0.1), on domain
+ids 40-59 that no other test module uses.
+"""
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+import yaml
+from rosbags.rosbag2 import Reader
+
+from arm_sim_ros import cli
+from arm_sim_ros.bag import NODE_TOPICS, TYPESTORE, BagWriter, joint_state
+from arm_sim_ros.scene import load_scene
+from arm_sim_ros.simulator import Simulator
+
+INFINITE = {"sec": 9223372036, "nsec": 854775807}
+# Jazzy's metadata for a publisher with the ROS default profile, as `ros2 bag record` writes it.
+JAZZY_DEFAULT_OFFER = {"history": "unknown", "depth": 0, "reliability": "reliable",
+                       "durability": "volatile", "deadline": INFINITE, "lifespan": INFINITE,
+                       "liveliness": "automatic", "liveliness_lease_duration": INFINITE,
+                       "avoid_ros_namespace_conventions": False}
+
+
+def read_bag(path):
+    """{topic: [(bag time ns, message, raw bytes)]} and {topic: connection}."""
+    with Reader(path) as reader:
+        connections = {c.topic: c for c in reader.connections}
+        messages = {topic: [] for topic in connections}
+        for connection, timestamp, raw in reader.messages():
+            message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+            messages[connection.topic].append((timestamp, message, bytes(raw)))
+    return messages, connections
+
+
+def run_bag(capsys, tmp_path, *argv):
+    path = tmp_path / "bag"
+    code = cli.main(["run", *argv, "--bag", str(path)])
+    _, err = capsys.readouterr()
+    assert code == 0, err
+    return path
+
+
+def core_samples(scene, every):
+    """The core stepped alone: a sample at t = 0 and after every `every` steps."""
+    sim = Simulator(scene)
+    samples = [(sim.steps, sim.sample())]
+    for _ in range(scene.steps_for(scene.duration)):
+        sim.step()
+        if sim.steps % every == 0:
+            samples.append((sim.steps, sim.sample()))
+    return samples
+
+
+# --- arm-sim run --bag ---------------------------------------------------------------------
+
+def test_run_bag_is_a_jazzy_mcap_bag_with_definitions_and_offered_qos(capsys, tmp_path):
+    path = run_bag(capsys, tmp_path, "--scene", "shoulder_torque_no_gravity")
+    assert sorted(p.name for p in path.iterdir()) == ["bag.mcap", "metadata.yaml"]
+    assert (path / "bag.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["message_count"] == 51 + 51 + 1
+    topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
+    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == NODE_TOPICS
+    for name, t in topics.items():
+        meta = t["topic_metadata"]
+        assert meta["serialization_format"] == "cdr"
+        assert meta["offered_qos_profiles"] == [JAZZY_DEFAULT_OFFER]
+        assert meta["type_description_hash"] == TYPESTORE.hash_rihs01(meta["type"])
+    _, connections = read_bag(path)
+    for topic, connection in connections.items():
+        # The full definition (with nested types) rides in the MCAP schema record.
+        assert connection.msgdef.data == TYPESTORE.generate_msgdef(connection.msgtype, ros_version=2)[0]
+        assert connection.msgdef.data.count("MSG: ") >= 1
+
+
+@pytest.mark.parametrize("scene_name, rate, every", [
+    ("release", 100.0, 1),
+    ("damped_release", 50.0, 2),
+    ("shoulder_torque_no_gravity", 25.0, 4),
+])
+def test_run_bag_joint_states_equal_the_core_at_the_publish_rate(capsys, tmp_path, scene_name,
+                                                                  rate, every):
+    path = run_bag(capsys, tmp_path, "--scene", scene_name, "--publish-rate", str(rate))
+    messages, _ = read_bag(path)
+    expected = core_samples(load_scene(scene_name), every)
+    recorded = messages["/joint_states"]
+    assert len(recorded) == len(expected)
+    for (steps, sample), (timestamp, message, _) in zip(expected, recorded):
+        t_ns = round(steps * 0.01 * 1e9)
+        assert timestamp == t_ns  # bag time is simulated time
+        assert message.header.stamp.sec * 10**9 + message.header.stamp.nanosec == t_ns
+        assert list(message.name) == ["shoulder_joint", "elbow_joint"]
+        assert message.position.tolist() == list(sample.q)
+        assert message.velocity.tolist() == list(sample.qd)
+        assert message.effort.tolist() == list(sample.tau)
+    assert [t for t, _, _ in recorded] == sorted({t for t, _, _ in recorded})
+
+
+def test_run_bag_records_the_constant_command_alongside_each_joint_state(capsys, tmp_path):
+    path = run_bag(capsys, tmp_path, "--scene", "shoulder_torque_no_gravity")
+    messages, _ = read_bag(path)
+    commands = messages["/joint_torque_commands"]
+    assert [t for t, _, _ in commands] == [t for t, _, _ in messages["/joint_states"]]
+    for _, message, _ in commands:
+        assert message.data.tolist() == [1.0, 0.0]
+        assert len(message.layout.dim) == 0 and message.layout.data_offset == 0
+
+
+def test_run_bag_without_commands_has_no_command_topic(capsys, tmp_path):
+    messages, _ = read_bag(run_bag(capsys, tmp_path, "--scene", "release"))
+    assert set(messages) == {"/joint_states", "/diagnostics"}
+
+
+def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_path):
+    path = run_bag(capsys, tmp_path, "--scene", "damped_release", "--duration", "2.5")
+    messages, _ = read_bag(path)
+    diagnostics = messages["/diagnostics"]
+    assert [t for t, _, _ in diagnostics] == [1_000_000_000, 2_000_000_000, 2_500_000_000]
+    sim = Simulator(load_scene("damped_release"))
+    for timestamp, message, _ in diagnostics:
+        sim.run(timestamp / 1e9 - sim.time)
+        (status,) = message.status
+        values = {kv.key: kv.value for kv in status.values}
+        assert status.level == 0 and status.name == "arm_sim: simulation"
+        assert values["sim_time"] == f"{sim.time:.6f}"
+        assert values["energy_residual"] == f"{sim.residual():.3e}"
+        assert values["refused_commands"] == "0"
+        assert float(values["real_time_factor"]) > 0
+
+
+@pytest.mark.parametrize("argv, reason", [
+    (["--publish-rate", "30"], "does not divide"),
+    (["--publish-rate", "0"], "positive"),
+    (["--publish-rate", "nan"], "positive"),
+    (["--step", "0.003", "--duration", "0.006"], "does not divide"),
+])
+def test_run_bag_refuses_a_rate_that_does_not_divide_the_step(capsys, tmp_path, argv, reason):
+    code = cli.main(["run", "--bag", str(tmp_path / "bag"), *argv])
+    _, err = capsys.readouterr()
+    assert code == 2 and reason in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bag").exists()
+
+
+def test_run_bag_never_overwrites_a_recording(capsys, tmp_path):
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "bag" / "keep").write_text("mine")
+    code = cli.main(["run", "--bag", str(tmp_path / "bag")])
+    assert code == 2 and "exists already" in capsys.readouterr().err
+    assert [p.name for p in (tmp_path / "bag").iterdir()] == ["keep"]
+
+
+def test_bag_writer_serialises_exactly_what_was_given(tmp_path):
+    message = joint_state(1_234_567_890_123, [1.5, -2.0], [0.25, 3.0], [0.0, -1.0], frame_id="base")
+    with BagWriter(tmp_path / "bag") as writer:
+        writer.add_topic("/joint_states", NODE_TOPICS["/joint_states"])
+        writer.write("/joint_states", 42, message)
+    messages, _ = read_bag(tmp_path / "bag")
+    ((timestamp, read, raw),) = messages["/joint_states"]
+    assert timestamp == 42 and raw == bytes(TYPESTORE.serialize_cdr(message, message.__msgtype__))
+    assert (read.header.stamp.sec, read.header.stamp.nanosec) == (1234, 567_890_123)
+    assert read.header.frame_id == "base" and read.effort.tolist() == [0.0, -1.0]
+
+
+# --- arm-sim record on the dds transport ----------------------------------------------------
+
+wire = pytest.importorskip("arm_sim_ros.ros_messages")
+
+
+def writer_for(participant, topic, message_type, qos=None):
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.topic import Topic
+
+    return DataWriter(participant, Topic(participant, wire.ros_topic(topic), message_type),
+                      qos=qos or wire.default_qos(message_type))
+
+
+def wait_matched(writers, timeout=20.0):
+    deadline = time.monotonic() + timeout
+    while not all(w.get_matched_subscriptions() for w in writers):
+        assert time.monotonic() < deadline, "the recorder never subscribed"
+        time.sleep(0.01)
+
+
+def joint_states(count, offset=0.0):
+    return [wire.JointState(header=wire.Header(stamp=wire.Time(100 + k, 1000 * k), frame_id="f"),
+                            name=["shoulder_joint", "elbow_joint"],
+                            position=[0.1 * k + offset, -0.2 * k], velocity=[1.0 / (k + 1), 2.0],
+                            effort=[float(k), 0.5]) for k in range(count)]
+
+
+def assert_recorded(messages, topic, published):
+    recorded = messages[topic]
+    assert [raw for _, _, raw in recorded] == [m.serialize() for m in published]
+    assert [t for t, _, _ in recorded] == sorted(t for t, _, _ in recorded)
+
+
+def test_record_writes_exactly_what_a_participant_published(tmp_path):
+    from cyclonedds.qos import Policy, Qos
+    from arm_sim_ros.record import StopRequest, record
+
+    domain = 47
+    publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+    recorder = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+    topics = dict(NODE_TOPICS) | {"/target": "sensor_msgs/msg/JointState"}
+    stop, result = StopRequest(), {}
+    thread = threading.Thread(target=lambda: result.update(
+        record(tmp_path / "bag", topics, recorder, stop=stop)))
+    thread.start()
+    try:
+        target_qos = wire.default_qos(wire.JointState) + Qos(
+            Policy.Durability.TransientLocal, Policy.Deadline(1_500_000_000))
+        writers = {"/joint_states": writer_for(publisher, "/joint_states", wire.JointState),
+                   "/joint_torque_commands": writer_for(publisher, "/joint_torque_commands",
+                                                        wire.Float64MultiArray),
+                   "/diagnostics": writer_for(publisher, "/diagnostics", wire.DiagnosticArray),
+                   "/target": writer_for(publisher, "/target", wire.JointState, target_qos)}
+        unrecorded = writer_for(publisher, "/elsewhere", wire.JointState)
+        wait_matched(writers.values())
+        published = {
+            "/joint_states": joint_states(30),
+            "/joint_torque_commands": [wire.Float64MultiArray(data=[0.5 * k, -1.0]) for k in range(7)],
+            "/diagnostics": [wire.DiagnosticArray(
+                header=wire.Header(stamp=wire.Time(5, 0)),
+                status=[wire.DiagnosticStatus(level=1, name="arm_sim: simulation", message="m",
+                                              hardware_id="arm_sim",
+                                              values=[wire.KeyValue("sim_time", "1.000000")])])],
+            "/target": joint_states(3, offset=10.0),
+        }
+        for topic, messages in published.items():
+            for message in messages:
+                writers[topic].write(message)
+        unrecorded.write(joint_states(1)[0])
+        for w in writers.values():
+            assert w.wait_for_acks(5_000_000_000)
+    finally:
+        stop.requested = True
+        thread.join(10)
+    assert result == {topic: len(m) for topic, m in published.items()}
+    messages, connections = read_bag(tmp_path / "bag")
+    assert set(messages) == set(published)
+    for topic, sent in published.items():
+        assert_recorded(messages, topic, sent)
+        assert connections[topic].msgtype == topics[topic]
+    _, js, _ = messages["/joint_states"][4]
+    assert js.position.tolist() == [0.4, -0.8] and js.header.stamp.nanosec == 4000
+    # The offers written are the publishers' own, as discovery reported them.
+    info = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())
+    offers = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+              for t in info["rosbag2_bagfile_information"]["topics_with_message_count"]}
+    assert offers["/joint_states"] == [JAZZY_DEFAULT_OFFER]
+    assert offers["/target"] == [JAZZY_DEFAULT_OFFER | {
+        "durability": "transient_local", "deadline": {"sec": 1, "nsec": 500_000_000}}]
+
+
+RECORD_MAIN = "import sys; from arm_sim_ros.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+@pytest.mark.parametrize("domain, signum", [(48, signal.SIGINT), (49, signal.SIGTERM)])
+def test_an_interrupted_recorder_leaves_a_readable_bag_with_everything_received(tmp_path, domain,
+                                                                                signum):
+    env = os.environ | {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                        "CYCLONEDDS_URI": wire.LOOPBACK_CONFIG, "ROS_STATIC_PEERS": ""}
+    path = tmp_path / "bag"
+    process = subprocess.Popen([sys.executable, "-c", RECORD_MAIN, "record", str(path)], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+        writer = writer_for(publisher, "/joint_states", wire.JointState)
+        wait_matched([writer])
+        sent = joint_states(200)
+        for message in sent:
+            writer.write(message)
+        assert writer.wait_for_acks(5_000_000_000)  # in the recorder's reader, not yet on disk
+        process.send_signal(signum)
+        out, err = process.communicate(timeout=20)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 0, err
+    assert "/joint_states 200" in out
+    messages, _ = read_bag(path)
+    assert_recorded(messages, "/joint_states", sent)
+    assert np.array_equal(messages["/joint_states"][-1][1].position, np.array(sent[-1].position))
+
+
+def test_record_refuses_before_joining_the_network(capsys, tmp_path):
+    (tmp_path / "bag").mkdir()
+    for argv, reason in ((["record", str(tmp_path / "bag")], "exists already"),
+                         (["record", "--topics", "/x:Twist", str(tmp_path / "new")], "NAME:TYPE"),
+                         (["record", "--duration", "-1", str(tmp_path / "new")], "positive")):
+        assert cli.main(argv) == 2
+        assert reason in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
