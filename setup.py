@@ -45,6 +45,7 @@ setup(
     entry_points={
         "console_scripts": [
             "arm-sim = arm_sim_ros.cli:main",
+            "arm_sim_node = arm_sim_ros.node:main",
         ],
     },
 )

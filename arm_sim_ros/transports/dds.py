@@ -1,0 +1,155 @@
+"""The arm_sim node on cyclonedds, as a ROS 2 peer on rmw_cyclonedds sees it.
+
+Mirrors the rclpy transport: a publisher of joint_states and /diagnostics, a subscription to
+joint_torque_commands, a tick timer and a 1 Hz diagnostics timer, plus the
+`ros_discovery_info` announcement that makes `ros2 node list` show the node. Parameters are
+set at start. Ticks can be driven from outside (tests, benchmarks) or by `spin()`.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from .. import ros_messages as msg
+from ..node_core import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
+                         ArmSimCore, DiagnosticData, JointStateData, resolve_parameters,
+                         split_stamp)
+
+
+def resolve_name(name: str, namespace: str = "/", remap: dict | None = None) -> str:
+    """A ROS topic name made absolute in `namespace`, after `-r from:=to` remapping."""
+    name = (remap or {}).get(name, name)
+    if name.startswith("/"):
+        return name
+    return namespace.rstrip("/") + "/" + name
+
+
+def to_joint_state(data: JointStateData) -> msg.JointState:
+    sec, nanosec = split_stamp(data.stamp_ns)
+    return msg.JointState(header=msg.Header(stamp=msg.Time(sec, nanosec), frame_id=data.frame_id),
+                          name=list(data.name), position=data.position, velocity=data.velocity,
+                          effort=data.effort)
+
+
+def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
+    sec, nanosec = split_stamp(data.stamp_ns)
+    status = msg.DiagnosticStatus(level=data.level, name=data.name, message=data.message,
+                                  hardware_id=data.hardware_id,
+                                  values=[msg.KeyValue(k, v) for k, v in data.values])
+    return msg.DiagnosticArray(header=msg.Header(stamp=msg.Time(sec, nanosec)), status=[status])
+
+
+class DdsArmSimNode:
+    def __init__(self, parameters: dict, *, domain_id: int | None = None, config: str | None = None,
+                 log=None, wall_clock=time.monotonic, start_stamp_ns: int | None = None,
+                 recorder=None, name: str = NODE_NAME, namespace: str = "/",
+                 remap: dict | None = None):
+        # Validate everything before any DDS entity exists: a refusal leaves nothing behind.
+        node_config = resolve_parameters(parameters)
+        self.name, self.namespace = name, namespace
+        self.log = log or logging.getLogger(name)
+        self.wall_clock = wall_clock
+        self.participant = msg.make_participant(domain_id, config)
+        topic = lambda ros_name: msg.ros_topic(resolve_name(ros_name, namespace, remap))  # noqa: E731
+        self.joint_state_writer = self._writer(topic(JOINT_STATES_TOPIC), msg.JointState)
+        self.diagnostics_writer = self._writer(topic(DIAGNOSTICS_TOPIC), msg.DiagnosticArray)
+        self.command_reader = DataReader(
+            self.participant, Topic(self.participant, topic(COMMAND_TOPIC), msg.Float64MultiArray),
+            qos=msg.default_qos(msg.Float64MultiArray))
+        self._command_ready = WaitSet(self.participant)
+        self._command_ready.attach(ReadCondition(
+            self.command_reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+        self._announce()
+        self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
+
+    def _writer(self, topic_name: str, message_type) -> DataWriter:
+        return DataWriter(self.participant, Topic(self.participant, topic_name, message_type),
+                          qos=msg.default_qos(message_type))
+
+    def _announce(self) -> None:
+        """Publish ros_discovery_info: the graph entry `ros2 node list` reads (transient-local,
+        so tools that start later still see it)."""
+        self.discovery_writer = DataWriter(
+            self.participant,
+            Topic(self.participant, "ros_discovery_info", msg.ParticipantEntitiesInfo),
+            qos=msg.discovery_info_qos())
+        node = msg.NodeEntitiesInfo(
+            node_namespace=self.namespace, node_name=self.name,
+            reader_gid_seq=[msg.gid(self.command_reader)],
+            writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer)])
+        self.discovery_writer.write(msg.ParticipantEntitiesInfo(
+            gid=msg.gid(self.participant), node_entities_info_seq=[node]))
+
+    # callbacks, as the rclpy node has them ------------------------------------------------
+
+    def take_commands(self, timeout: float = 0.0) -> int:
+        """Hand every waiting command to the core, waiting up to `timeout` s for the first.
+        Returns how many arrived (refused ones included)."""
+        if timeout > 0:
+            self._command_ready.wait(duration(seconds=timeout))
+        count = 0
+        for sample in self.command_reader.take(N=256):
+            if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
+                self.core.on_command(sample.data)
+                count += 1
+        return count
+
+    def tick(self, wall_now: float | None = None) -> JointStateData:
+        """The timer callback: take commands, step, publish joint_states."""
+        self.take_commands()
+        data = self.core.tick(wall_now)
+        self.joint_state_writer.write(to_joint_state(data))
+        return data
+
+    def publish_diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
+        data = self.core.diagnostics(wall_now)
+        self.diagnostics_writer.write(to_diagnostic_array(data))
+        return data
+
+    # the loop ------------------------------------------------------------------------------
+
+    def spin(self, duration_s: float | None = None, on_status=None) -> None:
+        """Tick at publish_rate x real_time_factor (as fast as possible when 0) until
+        `duration_s` of simulated time has passed, or forever. Once a wall second: diagnostics
+        and `on_status(line)`. A tick that comes late is counted, not made up: the schedule
+        restarts from now rather than bursting to catch up."""
+        config = self.core.config
+        ticks = None if duration_s is None else math.ceil(duration_s / config.tick_period - 1e-9)
+        period = config.wall_period
+        next_tick = self.wall_clock()
+        next_status = next_tick + 1.0
+        done = 0
+        while ticks is None or done < ticks:
+            now = self.wall_clock()
+            if period > 0 and now < next_tick:
+                time.sleep(next_tick - now)
+                now = self.wall_clock()
+            self.tick(now)
+            done += 1
+            next_tick += period
+            if next_tick < now - period:  # more than a tick behind: restart the schedule
+                next_tick = now
+            if now >= next_status:
+                self._status(now, on_status)
+                next_status = now + 1.0
+        self._status(self.wall_clock(), on_status)
+
+    def _status(self, now: float, on_status) -> None:
+        rtf = self.core.real_time_factor(now)
+        self.publish_diagnostics(now)
+        if on_status is not None:
+            on_status(self.core.status_line(rtf))
+
+    def close(self) -> None:
+        """Finish telemetry and leave the DDS graph (cyclonedds deletes an entity when its
+        last Python reference goes)."""
+        self.core.finish()
+        self._command_ready = self.command_reader = self.discovery_writer = None
+        self.joint_state_writer = self.diagnostics_writer = self.participant = None

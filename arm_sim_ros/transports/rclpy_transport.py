@@ -1,0 +1,130 @@
+"""The arm_sim node on rclpy (ROS 2 Jazzy), written as the ros2/examples nodes are.
+
+Parameters are declared from the node core's single list, with the scene's values as
+defaults; a set-parameters callback hands changes to the core, which refuses bad ones with a
+reason. `~/reset` (std_srvs/srv/Trigger) restarts the scene.
+"""
+from __future__ import annotations
+
+import time
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from ..node_core import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
+                         PARAMETERS, SPECS, ArmSimCore, DiagnosticData, JointStateData,
+                         ParameterRefused, resolve_parameters, scene_defaults, split_stamp)
+
+
+def _stamp(stamp_ns: int) -> Time:
+    sec, nanosec = split_stamp(stamp_ns)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def to_joint_state(data: JointStateData) -> JointState:
+    message = JointState()
+    message.header.stamp = _stamp(data.stamp_ns)
+    message.header.frame_id = data.frame_id
+    message.name = list(data.name)
+    message.position = data.position
+    message.velocity = data.velocity
+    message.effort = data.effort
+    return message
+
+
+def to_diagnostic_array(data: DiagnosticData) -> DiagnosticArray:
+    status = DiagnosticStatus(level=bytes([data.level]), name=data.name, message=data.message,
+                              hardware_id=data.hardware_id,
+                              values=[KeyValue(key=k, value=v) for k, v in data.values])
+    message = DiagnosticArray(status=[status])
+    message.header.stamp = _stamp(data.stamp_ns)
+    return message
+
+
+class ArmSimNode(Node):
+    def __init__(self, wall_clock=time.monotonic, recorder=None, status=None, **node_kwargs):
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._status = status
+        scene = self.declare_parameter(
+            "scene", SPECS["scene"].default,
+            ParameterDescriptor(description=SPECS["scene"].description, read_only=True)).value
+        defaults = scene_defaults(scene)
+        for spec in PARAMETERS:
+            if spec.name != "scene":
+                # dynamic typing: `-p publish_rate:=100` (an integer) is still a rate.
+                self.declare_parameter(spec.name, defaults[spec.name], ParameterDescriptor(
+                    description=spec.description, dynamic_typing=True))
+        config = resolve_parameters({name: self.get_parameter(name).value for name in SPECS})
+        self.core = ArmSimCore(config, self.get_logger(), wall_clock,
+                               self.get_clock().now().nanoseconds, recorder)
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+
+        self.joint_state_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
+        self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self.command_subscription = self.create_subscription(
+            Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
+        self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
+        self.tick_timer = self.create_timer(config.wall_period, self.on_tick)
+        self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
+
+    def on_command(self, message: Float64MultiArray) -> None:
+        self.core.on_command(list(message.data))
+
+    def on_tick(self) -> JointStateData:
+        data = self.core.tick()
+        self.joint_state_publisher.publish(to_joint_state(data))
+        return data
+
+    def on_diagnostics(self) -> DiagnosticData:
+        rtf = self.core.real_time_factor(self.core.wall_clock())
+        data = self.core.diagnostics()
+        self.diagnostics_publisher.publish(to_diagnostic_array(data))
+        if self._status is not None:
+            self._status(self.core.status_line(rtf))
+        return data
+
+    def on_reset(self, request, response):
+        self.core.reset()
+        response.success = True
+        response.message = f"scene {self.core.config.scene.name} restarted from its initial state"
+        return response
+
+    def on_set_parameters(self, parameters) -> SetParametersResult:
+        changes = {p.name: p.value for p in parameters}
+        try:
+            changed = self.core.set_parameters(changes)
+        except ParameterRefused as refusal:
+            self.get_logger().warning(str(refusal))
+            return SetParametersResult(successful=False, reason=str(refusal))
+        if {"publish_rate", "real_time_factor", "step_size"} & set(changed):
+            self.destroy_timer(self.tick_timer)
+            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_tick)
+        return SetParametersResult(successful=True)
+
+    def destroy_node(self):
+        self.core.finish()
+        return super().destroy_node()
+
+
+def run(ros_args: list, duration: float | None, status) -> int:
+    """Init, spin until `duration` simulated seconds (or Ctrl-C), shut down."""
+    rclpy.init(args=ros_args)
+    node = None
+    try:
+        node = ArmSimNode(status=status)
+        while rclpy.ok() and (duration is None or node.core.sim.time < duration - 1e-12):
+            rclpy.spin_once(node, timeout_sec=0.1)
+        if node is not None and status is not None:
+            status(node.core.status_line(node.core.real_time_factor(node.core.wall_clock())))
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
