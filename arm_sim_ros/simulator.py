@@ -2,15 +2,32 @@
 
 Simulated time is always steps x step_size, never an accumulated sum, so late callers
 cannot make it skip or drift.
+
+At the stability limit (stability.py) a step is split into equal sub-steps, and a step
+that would leave the finite numbers is refused: the last finite state is kept and
+`fault` says why. Both are reported in `events`.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
+from math import isfinite
 
-from . import model
+from . import model, stability
 from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, compile_step
 from .scene import Scene
+
+EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the simulator did that a person should hear about (kind: substepping, fault)."""
+
+    t: float
+    kind: str
+    message: str
 
 
 @dataclass(frozen=True)
@@ -51,16 +68,23 @@ class Simulator:
                                        scene.constant_torque, scene.initial_positions)
         self.channels = self.dynamics.channels
         self._rhs = self.dynamics.function
-        self._step = compile_step(INTEGRATORS[scene.integrator], len(self.channels))
+        tableau = INTEGRATORS[scene.integrator]
+        self._step = compile_step(tableau, len(self.channels))
+        self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
+        self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
         self._work_index = 4 + self.channels.index("work") if "work" in self.channels else None
         self._dissipated_index = (4 + self.channels.index("dissipated")
                                   if "dissipated" in self.channels else None)
         self.reset()
+        self._plan_substeps(tableau)
 
     def reset(self) -> None:
         s = self.scene
         self.state = (*s.initial_positions, *s.initial_velocities) + (0.0,) * len(self.channels)
         self.steps = 0
+        self.fault = None            # why the latest refused step was refused, None if none
+        self.refused_steps = 0
+        self._refused_step = -1      # index of the latest refused step
         self.dynamics.command[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
 
@@ -73,9 +97,59 @@ class Simulator:
         self.dynamics.command[0] = tau1
         self.dynamics.command[1] = tau2
 
+    def _plan_substeps(self, tableau) -> None:
+        """How many sub-steps keep damping stable at every elbow angle (1 = plain steps)."""
+        self.stability_limit = stability.real_stability_limit(tableau)
+        self.stability_ratio = (self.scene.damping * self.step_size
+                                * stability.worst_stiffness(self.arm))
+        adaptive = getattr(tableau, "adaptive", False)   # its own error control sub-steps
+        self.substeps = (1 if adaptive else
+                         stability.substeps_needed(self.stability_ratio, self.stability_limit))
+        self._advance = stability.substepping(self._step, self.substeps)
+        if self.substeps > 1:
+            self._emit("substepping", (
+                f"d h lambda_max = {self.stability_ratio:.4g} exceeds {tableau.name}'s stability "
+                f"limit {self.stability_limit:.4g}: each {self.step_size:g} s step is taken as "
+                f"{self.substeps} sub-steps"))
+
+    @property
+    def substeps_taken(self) -> int:
+        """Sub-steps run since reset in steps that had to be split (0 while plain RK4 is stable)."""
+        return self.steps * self.substeps if self.substeps > 1 else 0
+
+    @property
+    def holding(self) -> bool:
+        """True while the latest step was refused and the state is the last finite one."""
+        return self.refused_steps > 0 and self._refused_step == self.steps - 1
+
     def step(self) -> None:
-        self.state = self._step(self._rhs, self.state, self.step_size)
+        try:
+            y = self._advance(self._rhs, self.state, self.step_size)
+        except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
+            self._refuse(f"overflows the arithmetic ({error})")
+        else:
+            total = sum(y)
+            if total - total == 0.0 or all(isfinite(v) for v in y):  # inf - inf, NaN are NaN
+                self.state = y
+            else:
+                names = ("q1", "q2", "qd1", "qd2") + self.channels
+                self._refuse("would make " + ", ".join(
+                    f"{n} = {v}" for n, v in zip(names, y) if not isfinite(v)))
         self.steps += 1
+
+    def _refuse(self, why: str) -> None:
+        self.fault = (f"the step to t = {(self.steps + 1) * self.step_size:.6g} s {why}; "
+                      "holding the last finite state")
+        if not self.holding:            # the first of a run of refusals
+            self._emit("fault", self.fault)
+        self._refused_step = self.steps
+        self.refused_steps += 1
+
+    def _emit(self, kind: str, message: str) -> None:
+        event = Event(self.time, kind, message)
+        self.events.append(event)
+        for listener in self.event_listeners:
+            listener(event)
 
     def energy(self, state) -> float:
         q, qd = state[0:2], state[2:4]
