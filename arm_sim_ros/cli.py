@@ -80,7 +80,9 @@ class CsvRecorder:
 # Hooks other modules extend: each takes (args) and returns a recorder or None.
 RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None,
                  lambda args: importlib.import_module("arm_sim_ros.bag").run_recorder(args)
-                 if args.bag else None]
+                 if args.bag else None,
+                 lambda args: importlib.import_module("arm_sim_ros.telemetry").run_recorder(args)
+                 if args.rerun or args.rerun_spawn or args.rerun_connect else None]
 
 
 def cmd_run(args) -> int:
@@ -138,6 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--duration", help="seconds of simulated time (default: the scene's)")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.add_argument("--csv", metavar="PATH", help="write one row per step")
+    run.add_argument("--rerun", metavar="PATH", help="write a Rerun recording (.rrd)")
+    run.add_argument("--rerun-spawn", action="store_true", help="stream to a new Rerun viewer")
+    run.add_argument("--rerun-connect", metavar="ADDR", help="stream to a viewer at host:port")
     run.add_argument("--bag", metavar="DIR", help="write a rosbag2 (MCAP) recording of the topics")
     run.add_argument("--publish-rate", type=float, default=100.0, metavar="HZ",
                      help="JointState rate in the --bag recording (default 100 Hz)")

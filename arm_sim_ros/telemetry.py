@@ -1,0 +1,427 @@
+"""Rerun telemetry: the explainer's readouts on simulated time, beside a drawing of the arm.
+
+The only module that imports rerun. Recording must never slow or stop the physics:
+step() only appends the state tuple, and energies, torques and drawings are computed
+for a whole batch with numpy when it is sent (one send_columns per entity). A sink that
+fails (unwritable file, no viewer at the address, a viewer that dies) is one warning;
+the simulation runs on.
+
+Channels follow the scene's effects (Simulator.channels): no `energy/dissipated`
+without damping, no `work/actuator` or joint torques without an actuator.
+"""
+from __future__ import annotations
+
+import logging
+import socket
+import time
+from urllib.parse import urlsplit
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+TIMELINE = "sim_time"            # simulated time since the last reset: steps x step_size
+SESSION_TIMELINE = "session_time"  # simulated time summed over resets, so runs follow each other
+FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
+BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
+CHECK_EVERY = 256                # steps between looks at the wall clock
+FILE_PERIOD = 1.0                # wall seconds between sends to a file...
+LIVE_PERIOD = 0.1                # ...and to a viewer, which a person is watching
+FLUSH_TIMEOUT = 5.0              # wall seconds finish() waits for a sink before giving up on it
+DEFAULT_PORT = 9876
+
+# Bright enough for the viewer's dark theme; one colour per readout wherever it appears.
+ENERGY_SERIES = {
+    "energy/kinetic": ("kinetic T", (255, 170, 60)),
+    "energy/potential": ("potential V", (90, 180, 255)),
+    "energy/total": ("total E = T + V", (245, 245, 245)),
+    "energy/dissipated": ("dissipated ∫d|q̇|²dt", (255, 95, 125)),
+    "work/actuator": ("actuator work ∫τᵀq̇dt", (110, 230, 110)),
+    "energy/balance_residual": ("residual E−E₀−W+dissipated", (225, 120, 255)),
+}
+JOINT_SERIES = {
+    "joints/angle": ("angle (rad)", ("q1 shoulder", "q2 elbow")),
+    "joints/velocity": ("velocity (rad/s)", ("q̇1 shoulder", "q̇2 elbow")),
+    "joints/torque": ("applied torque (N m)", ("τ1 shoulder", "τ2 elbow")),
+}
+JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
+TRACE_COLOR = (200, 120, 255)
+HORIZON_COLOR = (110, 110, 110)
+LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
+          "warn": rr.TextLogLevel.WARN, "warning": rr.TextLogLevel.WARN,
+          "error": rr.TextLogLevel.ERROR}
+
+
+def energies(arm, gravity: float, q1, q2, u1, u2):
+    """Kinetic and potential energy of many states: model.kinetic_energy and
+    model.potential_energy term for term, in numpy (the scalar calls cost more than
+    the RK4 step itself; see benchmarks/bench_telemetry.py)."""
+    a, b, d = arm.inertia_coefficients
+    k1, k2 = arm.gravity_coefficients
+    c2 = np.cos(q2)
+    m11 = a + 2.0 * b * c2
+    m12 = d + b * c2
+    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + d * u2 * u2)
+    potential = gravity * (k1 * np.sin(q1) + k2 * np.sin(q1 + q2))
+    return kinetic, potential
+
+
+def gravity_torques(arm, gravity: float, q1, q2):
+    """model.gravity_torque for many configurations, as an (n, 2) array."""
+    k1, k2 = arm.gravity_coefficients
+    g2 = gravity * k2 * np.cos(q1 + q2)
+    return np.column_stack((gravity * k1 * np.cos(q1) + g2, g2))
+
+
+def drawing_points(arm, q1, q2):
+    """Elbow and tip of many configurations, y negated: the viewer's 2D y axis points down."""
+    l1, l2 = arm.link_lengths
+    elbow = np.column_stack((l1 * np.cos(q1), -l1 * np.sin(q1)))
+    tip = elbow + np.column_stack((l2 * np.cos(q1 + q2), -l2 * np.sin(q1 + q2)))
+    return elbow, tip
+
+
+def energy_paths(channels) -> list[str]:
+    """The scalar channels a scene with these integrated channels produces."""
+    paths = ["energy/kinetic", "energy/potential", "energy/total"]
+    if "dissipated" in channels:
+        paths.append("energy/dissipated")
+    if "work" in channels:
+        paths.append("work/actuator")
+    return paths + ["energy/balance_residual"]
+
+
+def joint_paths(channels) -> list[str]:
+    return ["joints/angle", "joints/velocity"] + (["joints/torque"] if "work" in channels else [])
+
+
+def blueprint(arm, channels, live: bool) -> rrb.Blueprint:
+    """Arm and events on the left; energy, work with residual, and joints on the right."""
+    reach = 1.1 * sum(arm.link_lengths)
+    energy = [p for p in ("energy/kinetic", "energy/potential", "energy/total", "energy/dissipated")
+              if p in energy_paths(channels)]
+    balance = [p for p in ("work/actuator", "energy/dissipated", "energy/balance_residual")
+               if p in energy_paths(channels)]
+    trace_range = rrb.VisibleTimeRanges(
+        timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
+    arm_view = rrb.Spatial2DView(
+        name="Arm (y up, V = 0 on the grey line)", origin="arm",
+        visual_bounds=rrb.VisualBounds2D(x_range=[-reach, reach], y_range=[-reach, reach]),
+        overrides={"arm/tip_trace": trace_range})
+    plots = [rrb.TimeSeriesView(name="Energy (J)", contents=energy,
+                                plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop)),
+             rrb.TimeSeriesView(name="Work, dissipation and balance residual (J)", contents=balance,
+                                plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop))]
+    joints = [rrb.TimeSeriesView(name=f"Joint {JOINT_SERIES[p][0]}", origin=p)
+              for p in joint_paths(channels)]
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(arm_view, rrb.TextLogView(name="Events", origin="events"),
+                         row_shares=[4, 1]),
+            rrb.Vertical(*plots, rrb.Horizontal(*joints), row_shares=[3, 3, 2]),
+            column_shares=[2, 3]),
+        rrb.TimePanel(timeline=TIMELINE, play_state="following" if live else "paused",
+                      state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+    )
+
+
+def viewer_url(address: str) -> str:
+    """`host:port`, `rerun+http://host:port/proxy` or a bare port -> the gRPC URL rerun takes."""
+    text = address.strip()
+    if text.isdigit():
+        text = f"127.0.0.1:{text}"
+    if "://" not in text:
+        text = f"rerun+http://{text}/proxy"
+    return text
+
+
+def viewer_reachable(url: str, timeout: float = 0.5) -> bool:
+    """A quick TCP check: rerun's own connect blocks ~5 s and then drops data silently."""
+    parts = urlsplit(url)
+    try:
+        with socket.create_connection((parts.hostname or "127.0.0.1", parts.port or DEFAULT_PORT),
+                                      timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+class RerunRecorder:
+    """A recorder for cli.RUN_RECORDERS and the node: start / step / flush / event / finish.
+
+    start(sim) may be called again for a new Simulator (e.g. after the node changes a
+    parameter); a reset is noticed by simulated time going back, and `session_time`
+    keeps such runs one after another.
+    """
+
+    def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
+                 warn=None):
+        self.scene = scene
+        self.path, self.spawn, self.connect = path, spawn, connect
+        self.live = bool(spawn or connect)
+        self._warn = warn or logging.getLogger(__name__).warning
+        self._warned = set()
+        self.stream = rr.RecordingStream(application_id)
+        self.sinks = []           # descriptions of the sinks that opened
+        self.enabled = False
+        self.sim = None
+        self._steps, self._states, self._commands = [], [], []
+        self._check_at = CHECK_EVERY
+        self._period = LIVE_PERIOD if self.live else FILE_PERIOD
+        self._last_send = time.monotonic()
+        self._last_t = None       # simulated time of the last row sent
+        self._session_offset = 0.0
+        self._last_tip = None
+        self._layout = None       # what the blueprint was drawn for: (channels, arm)
+
+    # -- protocol ---------------------------------------------------------------------
+
+    def start(self, sim) -> None:
+        """Begin (or, after a reset or for a new Simulator, continue) with sim's initial row."""
+        self._bind(sim)
+        self.event(f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
+                   f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
+                   f"{sim.scene.integrator}, E0 = {sim.initial_energy:.9g} J", at=sim.time)
+        self.step(sim)
+
+    def step(self, sim) -> None:
+        """After every physics step: keep the state, nothing else (see flush)."""
+        if sim is not self.sim:
+            self._bind(sim)
+        self._steps.append(sim.steps)
+        self._states.append(sim.state)
+        if self._commanded:
+            self._commands.append(tuple(sim.dynamics.command))
+        if len(self._states) >= self._check_at:
+            self.flush()
+
+    def flush(self, sim=None, force: bool = False) -> None:
+        """Send the buffered steps when a send is due: a period of wall time has passed
+        (LIVE_PERIOD for a viewer, FILE_PERIOD for a file) or BATCH_STEPS are waiting.
+        Cheap to call once per tick; step() also calls it every CHECK_EVERY steps."""
+        waiting = len(self._states)
+        due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
+        self._check_at = min(waiting + CHECK_EVERY, BATCH_STEPS)
+        if not waiting or not due:
+            return
+        steps, states, commands = self._steps, self._states, self._commands
+        self._steps, self._states, self._commands = [], [], []
+        self._check_at = min(CHECK_EVERY, BATCH_STEPS)
+        self._last_send = time.monotonic()
+        if self.enabled:
+            self._guard(self._send, np.array(steps, dtype=np.int64), np.array(states),
+                        np.array(commands) if self._commanded else None)
+
+    def event(self, text: str, level: str = "info", at: float | None = None) -> None:
+        """A text-log line at the latest simulated time seen (or `at`)."""
+        if not self.enabled:
+            return
+        if at is None:
+            at = (self._steps[-1] * self.sim.step_size if self._steps
+                  else self._last_t if self._last_t is not None else 0.0)
+        self._guard(self._log_event, text, LEVELS.get(level.lower(), rr.TextLogLevel.INFO), at)
+
+    def finish(self, sim=None) -> None:
+        """Send what is buffered and close the sinks, so a file is complete and verifies."""
+        self.flush(force=True)
+        if self.enabled:
+            self._guard(self.stream.flush, timeout_sec=FLUSH_TIMEOUT)
+            self._guard(self.stream.disconnect)
+        self.enabled = False
+
+    # -- sinks --------------------------------------------------------------------------
+
+    def open(self, sim) -> None:
+        """Open the sinks asked for; each failure is a warning and that sink is skipped."""
+        board = blueprint(sim.arm, sim.channels, self.live)
+        sinks = []
+        if self.path:
+            try:
+                open(self.path, "wb").close()
+                sinks.append(rr.FileSink(str(self.path)))
+                self.sinks.append(f"file {self.path}")
+            except OSError as error:
+                self._warn_once("file", f"rerun: cannot write {self.path} ({error.strerror}); "
+                                        "the simulation runs on without that recording")
+        if self.spawn:
+            try:
+                rr.spawn(port=DEFAULT_PORT, connect=False, recording=self.stream)
+                sinks.append(rr.GrpcSink(viewer_url(str(DEFAULT_PORT))))
+                self.sinks.append("spawned viewer")
+            except Exception as error:
+                self._warn_once("spawn", f"rerun: cannot spawn a viewer ({error}); running on")
+        if self.connect:
+            url = viewer_url(self.connect)
+            if viewer_reachable(url):
+                sinks.append(rr.GrpcSink(url))
+                self.sinks.append(f"viewer {url}")
+            else:
+                self._warn_once("connect", f"rerun: no viewer answers at {url}; running on "
+                                           "without it (start `rerun` first)")
+        if sinks:
+            rr.set_sinks(*sinks, default_blueprint=board, recording=self.stream)
+            self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
+            self.enabled = True
+
+    def _bind(self, sim) -> None:
+        """Rows buffered so far belong to the previous simulator: send them first."""
+        if self.sim is not None:
+            self.flush(force=True)
+        self.sim = sim
+        self._commanded = sim.scene.policy.startswith("command")
+        self._frame_every = max(1, round(FRAME_PERIOD / sim.step_size))
+        self._guard(self._describe, sim)
+
+    def _describe(self, sim) -> None:
+        """Open the sinks (first time) and log what does not change from step to step."""
+        layout = (sim.channels, sim.arm)
+        if self._layout is None:
+            self.open(sim)
+        elif layout != self._layout and self.enabled:
+            rr.send_blueprint(blueprint(sim.arm, sim.channels, self.live), recording=self.stream)
+        self._layout = layout
+        if not self.enabled:
+            return
+        log = self.stream.log
+        for path in energy_paths(sim.channels):
+            name, color = ENERGY_SERIES[path]
+            log(path, rr.SeriesLines(names=[name], colors=[color], widths=[2.0]), static=True)
+        for path in joint_paths(sim.channels):
+            log(path, rr.SeriesLines(names=list(JOINT_SERIES[path][1]), colors=list(JOINT_COLORS),
+                                     widths=[2.0, 2.0]), static=True)
+        reach = 1.1 * sum(sim.arm.link_lengths)
+        log("arm/horizon", rr.LineStrips2D([[(-reach, 0.0), (reach, 0.0)]], colors=[HORIZON_COLOR],
+                                           radii=[0.004], draw_order=0.0), static=True)
+        log("arm/links", rr.LineStrips2D.from_fields(colors=list(JOINT_COLORS), radii=[0.035],
+                                                     draw_order=[20.0]), static=True)
+        log("arm/joints", rr.Points2D.from_fields(colors=[(245, 245, 245)], radii=[0.05],
+                                                  draw_order=[30.0]), static=True)
+        log("arm/tip_trace", rr.LineStrips2D.from_fields(colors=[TRACE_COLOR], radii=[0.008],
+                                                         draw_order=[10.0]), static=True)
+
+    # -- sending ------------------------------------------------------------------------
+
+    def _send(self, steps, states, commands) -> None:
+        sim = self.sim
+        h = sim.step_size
+        t = steps * h
+        times = (_nanoseconds(t), _nanoseconds(t + self._session_offsets(t, h)))
+        index = _time_columns(times)
+        q1, q2, u1, u2 = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
+        kinetic, potential = energies(sim.arm, sim.scene.gravity, q1, q2, u1, u2)
+        total = kinetic + potential
+        books = {name: states[:, 4 + i] for i, name in enumerate(sim.channels)}
+        work = books.get("work", 0.0)
+        dissipated = books.get("dissipated", 0.0)
+        values = {"energy/kinetic": kinetic, "energy/potential": potential, "energy/total": total,
+                  "energy/balance_residual": total - sim.initial_energy - work + dissipated,
+                  "joints/angle": states[:, 0:2], "joints/velocity": states[:, 2:4]}
+        if "dissipated" in books:
+            values["energy/dissipated"] = dissipated
+        if "work" in books:
+            values["work/actuator"] = work
+            values["joints/torque"] = self._torques(q1, q2, commands)
+        send = self._send_columns
+        for path, column in values.items():
+            send(path, index, rr.Scalars.columns(scalars=column))
+        self._send_drawing(steps, q1, q2, times)
+        self._last_t = float(t[-1])
+
+    def _session_offsets(self, t, h):
+        """Per row, what to add to sim_time so that a run after a reset follows the last one."""
+        previous = np.concatenate(([self._last_t if self._last_t is not None else -h], t[:-1]))
+        jumps = np.where(t <= previous, previous - t + h, 0.0)
+        offsets = self._session_offset + np.cumsum(jumps)
+        self._session_offset = float(offsets[-1])
+        self._restarted = jumps > 0.0
+        return offsets
+
+    def _torques(self, q1, q2, commands):
+        """The applied torque per row, as sim.dynamics.applied_torque gives it at that step."""
+        scene, n = self.sim.scene, len(q1)
+        if commands is not None:
+            tau = commands.astype(float).reshape(n, 2)
+        else:
+            tau = np.tile(self.sim.dynamics.applied_torque((0.0, 0.0)), (n, 1)).astype(float)
+        if scene.policy.endswith("gravity_compensation") and scene.gravity != 0.0:
+            tau = (0.0 if scene.policy == "gravity_compensation" else tau) + gravity_torques(
+                self.sim.arm, scene.gravity, q1, q2)
+        return tau
+
+    def _send_drawing(self, steps, q1, q2, times) -> None:
+        """Links, joints and the tip's trace every FRAME_PERIOD of simulated time."""
+        frames = np.flatnonzero(steps % self._frame_every == 0)
+        if frames.size == 0:
+            return
+        index = _time_columns([column[frames] for column in times])
+        elbow, tip = drawing_points(self.sim.arm, q1[frames], q2[frames])
+        base = np.zeros_like(elbow)
+        links = np.stack((np.stack((base, elbow), 1), np.stack((elbow, tip), 1)), 1)
+        self._send_columns("arm/links", index, rr.LineStrips2D.columns(
+            strips=links.reshape(-1, 2, 2)).partition([2] * len(frames)))
+        self._send_columns("arm/joints", index, rr.Points2D.columns(
+            positions=np.stack((base, elbow, tip), 1).reshape(-1, 2)).partition([3] * len(frames)))
+        # The trace joins consecutive frames, but not across a reset.
+        previous = np.concatenate(([self._last_tip if self._last_tip is not None else tip[0]],
+                                   tip[:-1]))
+        restarted = np.flatnonzero(self._restarted[frames])
+        previous[restarted] = tip[restarted]
+        self._send_columns("arm/tip_trace", index, rr.LineStrips2D.columns(
+            strips=np.stack((previous, tip), 1)))
+        self._last_tip = tip[-1]
+
+    def _send_columns(self, path, index, columns) -> None:
+        rr.send_columns(path, indexes=index, columns=columns, recording=self.stream)
+
+    def _log_event(self, text, level, at) -> None:
+        offset = self._session_offset if self._last_t is None or at > self._last_t else (
+            self._session_offset + self._last_t + self.sim.step_size - at)
+        self.stream.set_time(TIMELINE, duration=at)
+        self.stream.set_time(SESSION_TIMELINE, duration=at + offset)
+        self.stream.log("events", rr.TextLog(text, level=level))
+
+    # -- failures -----------------------------------------------------------------------
+
+    def _guard(self, action, *args, **kwargs) -> None:
+        """Run a logging action; a failure is one warning and telemetry stops, physics does not."""
+        try:
+            action(*args, **kwargs)
+        except Exception as error:
+            self._warn_once("send", f"rerun: telemetry failed ({type(error).__name__}: {error}); "
+                                    "the simulation runs on without it")
+            self.enabled = False
+
+    def _warn_once(self, key: str, message: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            self._warn(message)
+
+
+def _time_columns(times):
+    return [rr.TimeColumn(TIMELINE, duration=times[0]),
+            rr.TimeColumn(SESSION_TIMELINE, duration=times[1])]
+
+
+def _nanoseconds(seconds):
+    """Simulated seconds as the timeline's integer nanoseconds (exact for steps x h)."""
+    return np.rint(seconds * 1e9).astype("timedelta64[ns]")
+
+
+def make_recorder(scene=None, path=None, spawn=False, connect=None, application_id="arm_sim",
+                  warn=None) -> RerunRecorder | None:
+    """A recorder writing to `path` (.rrd), a spawned viewer and/or a running viewer at
+    `connect`; None when no sink is asked for. The recording is named after `scene`
+    (default: the first simulator's); `warn` receives the one-line warnings (default:
+    the `arm_sim_ros.telemetry` logger)."""
+    if not (path or spawn or connect):
+        return None
+    return RerunRecorder(scene, path=path, spawn=spawn, connect=connect,
+                         application_id=application_id, warn=warn)
+
+
+def run_recorder(args) -> RerunRecorder | None:
+    """`arm-sim run --rerun PATH / --rerun-spawn / --rerun-connect ADDR`."""
+    return make_recorder(path=args.rerun, spawn=args.rerun_spawn, connect=args.rerun_connect)

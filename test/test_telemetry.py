@@ -1,0 +1,402 @@
+"""Rerun recordings read back and compared with the core, value for value.
+
+Each test writes a recording, reads it with rr.chunk.RrdReader and checks it against a
+Simulator run of the same scene: channel set, time column, values to 1e-12.
+"""
+import math
+import socket
+import subprocess
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+import rerun as rr
+
+from arm_sim_ros import cli, model, telemetry
+from arm_sim_ros.scene import load_scene
+from arm_sim_ros.simulator import Simulator
+
+TOL = 1e-12
+ALL_CHANNELS = {"energy/kinetic", "energy/potential", "energy/total", "energy/dissipated",
+                "work/actuator", "energy/balance_residual", "joints/angle", "joints/velocity",
+                "joints/torque", "arm/links", "arm/joints", "arm/tip_trace", "events"}
+
+
+def read_back(path):
+    """{entity: {column: [values in session_time order]}} of the recording's temporal rows."""
+    reader = rr.chunk.RrdReader(str(path))
+    (recording,) = reader.recordings()
+    columns = defaultdict(lambda: defaultdict(list))
+    for chunk in reader.stream(store=recording):
+        if chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        for field in batch.schema:
+            if field.name in ("rerun.controls.RowId", "log_time", "log_tick"):
+                continue
+            column = batch.column(field.name)
+            if pa.types.is_duration(column.type):
+                column = column.cast(pa.int64())
+            values = column.to_pylist()
+            if field.name.startswith("TextLog:") or field.name == "LineStrips2D:strips" and (
+                    chunk.entity_path == "/arm/tip_trace"):
+                values = [v[0] for v in values]     # one text / one segment per row
+            columns[chunk.entity_path.lstrip("/")][field.name] += values
+    for entity in columns.values():
+        order = np.argsort(entity["session_time"], kind="stable")
+        for name in entity:
+            entity[name] = [entity[name][i] for i in order]
+    return columns
+
+
+def blueprint_rows(path):
+    """{blueprint entity: {column: first value}} of the saved blueprint."""
+    reader = rr.chunk.RrdReader(str(path))
+    (store,) = reader.blueprints()
+    rows = defaultdict(dict)
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        for field in batch.schema:
+            if ":" in field.name:
+                rows[chunk.entity_path][field.name] = batch.column(field.name).to_pylist()[0]
+    return rows
+
+
+def record(scene, path, steps=None, on_step=None, **options):
+    """Run `scene` for `steps` (default: its duration) with a recorder; return the core's
+    samples of the same run (initial row included) and the recorder."""
+    sim = Simulator(scene)
+    recorder = telemetry.make_recorder(scene, path=str(path), **options)
+    recorder.start(sim)
+    samples = [sim.sample()]
+    for k in range(scene.steps_for(scene.duration) if steps is None else steps):
+        if on_step is not None:
+            on_step(sim, k)
+        sim.step()
+        recorder.step(sim)
+        samples.append(sim.sample())
+    recorder.finish(sim)
+    return samples, recorder
+
+
+def scalars(entity):
+    return np.array(entity["Scalars:scalars"])
+
+
+def assert_equals_core(columns, samples):
+    """Time column = simulated time; every readout = the core's sample() to 1e-12."""
+    expected = {
+        "energy/kinetic": [[s.kinetic] for s in samples],
+        "energy/potential": [[s.potential] for s in samples],
+        "energy/total": [[s.total] for s in samples],
+        "energy/balance_residual": [[s.residual] for s in samples],
+        "joints/angle": [list(s.q) for s in samples],
+        "joints/velocity": [list(s.qd) for s in samples],
+        "energy/dissipated": [[s.dissipated] for s in samples],
+        "work/actuator": [[s.work] for s in samples],
+        "joints/torque": [list(s.tau) for s in samples],
+    }
+    times = [round(s.t * 1e9) for s in samples]
+    for path, values in expected.items():
+        if path not in columns:
+            continue
+        assert columns[path]["sim_time"] == times, path
+        assert np.max(np.abs(scalars(columns[path]) - np.array(values))) <= TOL, path
+
+
+def test_damped_release_reads_back_equal_to_the_core(tmp_path):
+    scene = load_scene("damped_release")
+    samples, _ = record(scene, tmp_path / "damped.rrd")
+    columns = read_back(tmp_path / "damped.rrd")
+    assert len(samples) == 201
+    assert columns["energy/kinetic"]["sim_time"][-1] == 2_000_000_000   # 2 s of simulated time
+    assert_equals_core(columns, samples)
+    # Damping takes energy out: total falls while dissipated rises, residual stays tiny.
+    total, dissipated = scalars(columns["energy/total"]), scalars(columns["energy/dissipated"])
+    assert total[-1, 0] < -6.0 and dissipated[-1, 0] > 6.0
+    assert np.max(np.abs(scalars(columns["energy/balance_residual"]))) < 1e-5
+
+
+@pytest.mark.parametrize("name, present, absent", [
+    ("release", set(), {"energy/dissipated", "work/actuator", "joints/torque"}),
+    ("damped_release", {"energy/dissipated"}, {"work/actuator", "joints/torque"}),
+    ("shoulder_torque_no_gravity", {"work/actuator", "joints/torque"}, {"energy/dissipated"}),
+])
+def test_channels_follow_the_scenes_effects(tmp_path, name, present, absent):
+    scene = load_scene(name)
+    samples, _ = record(scene, tmp_path / f"{name}.rrd")
+    columns = read_back(tmp_path / f"{name}.rrd")
+    always = {"energy/kinetic", "energy/potential", "energy/total", "energy/balance_residual",
+              "joints/angle", "joints/velocity", "arm/links", "arm/joints", "arm/tip_trace",
+              "events"}
+    assert set(columns) == always | present
+    assert not set(columns) & absent
+    assert set(columns) <= ALL_CHANNELS
+    assert_equals_core(columns, samples)
+
+
+@pytest.mark.parametrize("name, overrides", [
+    ("moving_gravity_compensation", {}),
+    ("moving_frozen_gravity", {}),
+    ("shoulder_torque_no_gravity", {"damping": 0.3}),
+    ("release", {"policy": "command", "damping": 0.2}),
+    ("release", {"policy": "command_gravity_compensation"}),
+    ("release", {"policy": "command_gravity_compensation", "gravity": 0.0}),
+])
+def test_torque_and_work_equal_the_core_for_every_policy(tmp_path, name, overrides):
+    scene = load_scene(name).replace(duration=0.5, **overrides)
+
+    def commands(sim, k):  # a new held command every 10 steps, as a node would get them
+        if k % 10 == 0:
+            sim.set_command(math.sin(k / 7.0), -0.5 + k / 100.0)
+
+    samples, _ = record(scene, tmp_path / "policy.rrd", on_step=commands)
+    columns = read_back(tmp_path / "policy.rrd")
+    assert {"work/actuator", "joints/torque"} <= set(columns)
+    assert_equals_core(columns, samples)
+    assert np.max(np.abs(scalars(columns["work/actuator"]))) > 0.0
+
+
+def test_blueprint_is_saved_paused_on_simulated_time(tmp_path):
+    record(load_scene("release"), tmp_path / "release.rrd")
+    rows = blueprint_rows(tmp_path / "release.rrd")
+    names = {r.get("ViewBlueprint:display_name", [None])[0] for r in rows.values()}
+    assert {"Energy (J)", "Work, dissipation and balance residual (J)", "Events",
+            "Joint angle (rad)", "Joint velocity (rad/s)"} <= names
+    assert any(name.startswith("Arm") for name in names if name)
+    assert "Joint applied torque (N m)" not in names        # no actuator in this scene
+    assert rows["/time_panel"]["TimePanelBlueprint:timeline"] == ["sim_time"]
+    assert rows["/time_panel"]["TimePanelBlueprint:play_state"] == [1]     # paused
+    queries = [r["ViewContents:query"] for r in rows.values() if "ViewContents:query" in r]
+    assert ["energy/kinetic", "energy/potential", "energy/total"] in queries
+    assert ["energy/balance_residual"] in queries            # no damping, no actuator here
+
+
+def test_series_are_named_and_coloured(tmp_path):
+    record(load_scene("damped_release").replace(duration=0.1), tmp_path / "styled.rrd")
+    reader = rr.chunk.RrdReader(str(tmp_path / "styled.rrd"))
+    styles = {}
+    for chunk in reader.stream(store=reader.recordings()[0]):
+        batch = chunk.to_record_batch()
+        if chunk.is_static and "SeriesLines:names" in batch.schema.names:
+            styles[chunk.entity_path.lstrip("/")] = (batch.column("SeriesLines:names")[0].as_py(),
+                                                     batch.column("SeriesLines:colors")[0].as_py())
+    assert set(styles) == {"energy/kinetic", "energy/potential", "energy/total",
+                           "energy/dissipated", "energy/balance_residual", "joints/angle",
+                           "joints/velocity"}
+    for names, colors in styles.values():
+        assert all(names) and len(names) == len(colors)
+        for rgba in colors:   # visible on the dark theme: no channel darker than mid grey
+            assert max((rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255) >= 128
+
+
+def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
+    scene = load_scene("release").replace(step_size=0.001, duration=0.1,
+                                          link_lengths=(0.8, 1.2), com_distances=(0.4, 0.5))
+    samples, _ = record(scene, tmp_path / "drawn.rrd")
+    columns = read_back(tmp_path / "drawn.rrd")
+    every = round(telemetry.FRAME_PERIOD / scene.step_size)
+    frames = samples[::every]
+    assert columns["arm/links"]["sim_time"] == [round(s.t * 1e9) for s in frames]
+    for sample, strips, joints in zip(frames, columns["arm/links"]["LineStrips2D:strips"],
+                                      columns["arm/joints"]["Points2D:positions"]):
+        base, elbow, tip = (np.array([x, -y]) for x, y in model.link_points(scene.arm, sample.q))
+        # Rerun stores 2D positions as float32.
+        assert np.allclose(np.array(strips), [[base, elbow], [elbow, tip]], atol=2e-7, rtol=0)
+        assert np.allclose(np.array(joints), [base, elbow, tip], atol=2e-7, rtol=0)
+    # The trace joins consecutive tips.
+    trace = np.array(columns["arm/tip_trace"]["LineStrips2D:strips"])
+    assert np.allclose(trace[1:, 0], trace[:-1, 1], atol=0, rtol=0)
+
+
+def test_events_are_logged_at_the_latest_simulated_time(tmp_path):
+    scene = load_scene("release").replace(duration=0.1)
+    sim = Simulator(scene)
+    recorder = telemetry.make_recorder(scene, path=str(tmp_path / "events.rrd"))
+    recorder.start(sim)
+    for _ in range(7):
+        sim.step()
+        recorder.step(sim)
+    recorder.event("refused command: tau1 = nan is not finite", level="warn")
+    recorder.finish(sim)
+    events = read_back(tmp_path / "events.rrd")["events"]
+    assert events["TextLog:text"][0].startswith("scene release start: policy zero")
+    assert events["TextLog:text"][1] == "refused command: tau1 = nan is not finite"
+    assert events["TextLog:level"] == ["INFO", "WARN"]
+    assert events["sim_time"] == [0, round(7 * 0.01 * 1e9)]
+
+
+def test_a_reset_restarts_sim_time_and_session_time_runs_on(tmp_path):
+    scene = load_scene("damped_release")
+    sim = Simulator(scene)
+    recorder = telemetry.make_recorder(scene, path=str(tmp_path / "reset.rrd"))
+    recorder.start(sim)
+    samples = [sim.sample()]
+    for steps in (30, 20):
+        for _ in range(steps):
+            sim.step()
+            recorder.step(sim)
+            samples.append(sim.sample())
+        sim.reset()
+        recorder.start(sim)
+        samples.append(sim.sample())
+    recorder.finish(sim)
+    columns = read_back(tmp_path / "reset.rrd")
+    kinetic = columns["energy/kinetic"]
+    h_ns = round(0.01 * 1e9)
+    assert kinetic["sim_time"] == ([k * h_ns for k in range(31)] + [k * h_ns for k in range(21)]
+                                   + [0])
+    assert kinetic["session_time"] == [k * h_ns for k in range(53)]
+    assert np.max(np.abs(scalars(kinetic)[:, 0] - [s.kinetic for s in samples])) <= TOL
+
+
+def test_a_new_simulator_is_recorded_with_its_own_parameters(tmp_path):
+    """The node may swap in a rebuilt Simulator (changed parameters) without start()."""
+    first = Simulator(load_scene("release"))
+    second = Simulator(load_scene("release").replace(damping=0.7, gravity=3.0))
+    recorder = telemetry.make_recorder(first.scene, path=str(tmp_path / "swap.rrd"))
+    recorder.start(first)
+    samples = [first.sample()]
+    for sim in (first, second):
+        for _ in range(25):
+            sim.step()
+            recorder.step(sim)
+            samples.append(sim.sample())
+    recorder.finish(second)
+    columns = read_back(tmp_path / "swap.rrd")
+    assert np.max(np.abs(scalars(columns["energy/potential"])[:, 0]
+                         - [s.potential for s in samples])) <= TOL
+    assert len(columns["energy/dissipated"]["sim_time"]) == 25
+
+
+def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
+    monkeypatch.setattr(telemetry, "BATCH_STEPS", 37)
+    monkeypatch.setattr(telemetry, "CHECK_EVERY", 5)
+    monkeypatch.setattr(telemetry, "FILE_PERIOD", 1e9)
+    scene = load_scene("damped_release").replace(step_size=0.002, duration=0.5)
+    sends = []
+    original = telemetry.RerunRecorder._send
+    monkeypatch.setattr(telemetry.RerunRecorder, "_send",
+                        lambda self, steps, *rest: (sends.append(len(steps)),
+                                                    original(self, steps, *rest)))
+    samples, _ = record(scene, tmp_path / "batched.rrd")
+    assert sends == [37] * 6 + [251 - 37 * 6]
+    columns = read_back(tmp_path / "batched.rrd")
+    assert_equals_core(columns, samples)
+    trace = np.array(columns["arm/tip_trace"]["LineStrips2D:strips"])
+    assert np.allclose(trace[1:, 0], trace[:-1, 1], atol=0, rtol=0)   # no gap between batches
+
+
+def test_an_unwritable_file_is_one_warning_and_the_run_goes_on(tmp_path):
+    warnings = []
+    scene = load_scene("damped_release")
+    sim = Simulator(scene)
+    recorder = telemetry.make_recorder(scene, path=str(tmp_path / "missing" / "x.rrd"),
+                                       warn=warnings.append)
+    recorder.start(sim)
+    sim.run(scene.duration, recorder.step)
+    recorder.event("still running")
+    recorder.finish(sim)
+    assert sim.steps == 200
+    assert len(warnings) == 1 and "cannot write" in warnings[0]
+    assert not recorder.enabled
+
+
+def test_a_missing_viewer_is_one_warning_and_the_run_goes_on(tmp_path):
+    with socket.socket() as s:       # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    warnings = []
+    scene = load_scene("release")
+    samples, recorder = record(scene, tmp_path / "alongside.rrd", connect=f"127.0.0.1:{port}",
+                               warn=warnings.append)
+    assert len(warnings) == 1 and f"127.0.0.1:{port}" in warnings[0]
+    assert recorder.sinks == [f"file {tmp_path / 'alongside.rrd'}"]
+    assert_equals_core(read_back(tmp_path / "alongside.rrd"), samples)   # the file still works
+
+
+def test_viewer_addresses():
+    assert telemetry.viewer_url("9876") == "rerun+http://127.0.0.1:9876/proxy"
+    assert telemetry.viewer_url("host:1234") == "rerun+http://host:1234/proxy"
+    assert telemetry.viewer_url("rerun+http://h:1/proxy") == "rerun+http://h:1/proxy"
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        url = telemetry.viewer_url(str(server.getsockname()[1]))
+        assert telemetry.viewer_reachable(url)
+    assert not telemetry.viewer_reachable(url)
+
+
+def test_vectorised_helpers_equal_the_models_scalar_functions():
+    arm = model.ArmParameters(link_lengths=(0.7, 1.3), link_masses=(2.0, 0.5),
+                              com_distances=(0.3, 0.9), com_inertias=(0.05, 0.2))
+    rng = np.random.default_rng(4)
+    q1, q2, u1, u2 = rng.uniform(-7.0, 7.0, size=(4, 500))
+    kinetic, potential = telemetry.energies(arm, 9.81, q1, q2, u1, u2)
+    torques = telemetry.gravity_torques(arm, 9.81, q1, q2)
+    elbow, tip = telemetry.drawing_points(arm, q1, q2)
+    for i in range(500):
+        q, qd = (q1[i], q2[i]), (u1[i], u2[i])
+        scale = 1.0 + abs(model.kinetic_energy(arm, q, qd))
+        assert abs(kinetic[i] - model.kinetic_energy(arm, q, qd)) <= TOL * scale
+        assert abs(potential[i] - model.potential_energy(arm, q, 9.81)) <= TOL
+        assert np.allclose(torques[i], model.gravity_torque(arm, q, 9.81), atol=TOL, rtol=0)
+        _, (ex, ey), (tx, ty) = model.link_points(arm, q)
+        assert np.allclose([*elbow[i], *tip[i]], [ex, -ey, tx, -ty], atol=TOL, rtol=0)
+
+
+def test_the_recording_verifies(tmp_path):
+    viewer = Path(rr.__file__).parent.parent / "rerun_cli" / "rerun"
+    if not viewer.is_file():
+        pytest.skip("the rerun CLI is not shipped with this rerun-sdk install")
+    record(load_scene("damped_release"), tmp_path / "verify.rrd")
+    result = subprocess.run([str(viewer), "rrd", "verify", str(tmp_path / "verify.rrd")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+
+
+def test_arm_sim_run_writes_the_recording(tmp_path, capsys):
+    path = tmp_path / "cli.rrd"
+    assert cli.main(["run", "--scene", "damped_release", "--rerun", str(path), "--json"]) == 0
+    columns = read_back(path)
+    reference = Simulator(load_scene("damped_release"))
+    samples = [reference.sample()]
+    reference.run(2.0, lambda sim: samples.append(sim.sample()))
+    assert_equals_core(columns, samples)
+    assert "energy/dissipated" in columns and "work/actuator" not in columns
+
+
+def test_arm_sim_run_with_an_unwritable_recording_still_runs(tmp_path, capsys, caplog):
+    path = tmp_path / "no" / "such" / "dir.rrd"
+    assert cli.main(["run", "--scene", "release", "--rerun", str(path)]) == 0
+    assert "t = 0.500000 s" in capsys.readouterr().out
+    assert [r.message for r in caplog.records if "cannot write" in r.message] != []
+
+
+def test_the_node_writes_a_recording_in_process(tmp_path):
+    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    path = tmp_path / "node.rrd"
+    config = node_core.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
+                                           "publish_rate": 50.0})
+    lines = []
+
+    class Log:
+        def __getattr__(self, level):
+            return lambda text: lines.append((level, text))
+
+    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
+    reference = Simulator(config.scene)
+    samples = [reference.sample()]
+    for _ in range(25):
+        core.tick(0.0)
+        for _ in range(config.steps_per_tick):
+            reference.step()
+            samples.append(reference.sample())
+    core.finish()
+    columns = read_back(path)
+    assert_equals_core(columns, samples)
+    assert columns["energy/kinetic"]["sim_time"][-1] == round(0.5 * 1e9)
+    assert any("start" in text for text in columns["events"]["TextLog:text"])
+    assert not [text for level, text in lines if level in ("warning", "error")]
