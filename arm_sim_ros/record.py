@@ -8,8 +8,8 @@ that bag time is when the publisher sent each message (its DDS source timestamp)
 than when it arrived: on one machine the two differ by the ~0.3 ms transport latency, and
 the send time keeps the publishing cadence that `ros2 bag play` reproduces. Messages keep
 their own header stamps; each topic carries the QoS its publishers offered, as discovery
-reports it. The recording stops at Ctrl-C,
-SIGTERM or --duration, and always closes the bag, so every message taken is kept.
+reports it. The recording stops at Ctrl-C, SIGTERM or --duration, and always drains the
+readers and closes the bag, so every message received is kept.
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
                   "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
 EXTRA_TYPES = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray")
 POLL_SECONDS = 0.1  # how soon a stop request is noticed
+TAKE_BATCH = 256
 
 
 def parse_topic(text: str) -> tuple[str, str]:
@@ -73,19 +74,19 @@ class TopicRecorder:
         return self.drain()
 
     def drain(self) -> int:
+        """Write every sample the readers hold; returns how many."""
         from cyclonedds.internal import InvalidSample
 
         written = 0
         for name, reader in self._readers.items():
-            samples = [s for s in reader.take(N=1000) if not isinstance(s, InvalidSample)]
-            if not samples:
-                continue
-            if name not in self.writer:
-                self._add(name)
-            for sample in samples:
-                self.writer.write(name, sample.sample_info.source_timestamp,
-                                  self._message(name, sample))
-            written += len(samples)
+            while taken := reader.take(N=TAKE_BATCH):
+                samples = [s for s in taken if not isinstance(s, InvalidSample)]
+                if samples and name not in self.writer:
+                    self._add(name)
+                for sample in samples:
+                    self.writer.write(name, sample.sample_info.source_timestamp,
+                                      self._message(name, sample))
+                written += len(samples)
         return written
 
     def _message(self, name, sample):

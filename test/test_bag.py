@@ -276,7 +276,7 @@ def test_an_interrupted_recorder_leaves_a_readable_bag_with_everything_received(
         publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
         writer = writer_for(publisher, "/joint_states", wire.JointState)
         wait_matched([writer])
-        sent = joint_states(200)
+        sent = joint_states(600)  # more than one take() batch
         for message in sent:
             writer.write(message)
         assert writer.wait_for_acks(5_000_000_000)  # in the recorder's reader, not yet on disk
@@ -287,7 +287,7 @@ def test_an_interrupted_recorder_leaves_a_readable_bag_with_everything_received(
             process.kill()
             process.wait()
     assert process.returncode == 0, err
-    assert "/joint_states 200" in out
+    assert "/joint_states 600" in out
     messages, _ = read_bag(path)
     assert_recorded(messages, "/joint_states", sent)
     assert np.array_equal(messages["/joint_states"][-1][1].position, np.array(sent[-1].position))
