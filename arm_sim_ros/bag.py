@@ -13,7 +13,7 @@ does not carry them) and infinite durations as {sec: 9223372036, nsec: 854775807
 """
 from __future__ import annotations
 
-from math import ceil, isfinite
+from math import ceil
 from pathlib import Path
 from time import perf_counter
 
@@ -216,12 +216,12 @@ class RunBag:
         self.diagnostics_steps = ceil(DIAGNOSTICS_PERIOD / sim.step_size - 1e-9)
         self.last_diagnostics = 0
         self.max_abs_residual = 0.0
-        self.held = False  # the integration left the finite numbers: stop publishing, as the node
         self.wall_start = perf_counter()
         self.publish(sim)
 
     def step(self, sim) -> None:
-        self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
+        if not sim.holding:
+            self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
         if sim.steps % self.publish_steps == 0:
             self.publish(sim)
         if sim.steps - self.last_diagnostics >= self.diagnostics_steps:
@@ -236,9 +236,6 @@ class RunBag:
 
     def publish(self, sim) -> None:
         s, t = sim.sample(), nanoseconds(sim)
-        self.held = self.held or not all(isfinite(v) for v in (*s.q, *s.qd, *s.tau))
-        if self.held:
-            return
         self.writer.write("/joint_states", t, joint_state(t, s.q, s.qd, s.tau))
         if self.commands:
             self.writer.write("/joint_torque_commands", t, torque_command(applied_command(sim)))
@@ -248,15 +245,16 @@ class RunBag:
         s, t = sim.sample(), nanoseconds(sim)
         wall = perf_counter() - self.wall_start
         command = applied_command(sim) if self.commands else (0.0, 0.0)
-        level, message = ((ERROR, "integration not finite: JointState no longer recorded")
-                          if self.held else (OK, "running"))
+        # A refused (non-finite) step leaves the last finite state in place, as in the node.
+        level, message = (ERROR, sim.fault) if sim.holding else (OK, "running")
         self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=[
             ("scene", sim.scene.name), ("policy", sim.scene.policy),
             ("sim_time", f"{s.t:.6f}"),
             ("real_time_factor", f"{s.t / wall:.3f}" if wall > 0 else "inf"),
-            ("energy_residual", "held" if self.held else f"{s.residual:.3e}"),
+            ("energy_residual", "held" if sim.holding else f"{s.residual:.3e}"),
             ("max_abs_energy_residual", f"{self.max_abs_residual:.3e}"),
-            ("refused_commands", "0"), ("late_ticks", "0"), ("command_timeouts", "0"),
+            ("received_commands", "0"), ("refused_commands", "0"), ("late_ticks", "0"),
+            ("command_timeouts", "0"),
             ("command", f"{command[0]:g} {command[1]:g}"),
             ("steps_per_tick", str(self.publish_steps)),
         ]))

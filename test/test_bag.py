@@ -137,6 +137,17 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
         assert float(values["real_time_factor"]) > 0
 
 
+def test_run_bag_records_only_finite_values_and_reports_a_refused_step(capsys, tmp_path):
+    path = run_bag(capsys, tmp_path, "--set", "initial_velocities=1e200,1e200", "--duration", "1")
+    messages, _ = read_bag(path)
+    for _, message, _ in messages["/joint_states"]:
+        assert np.isfinite([*message.position, *message.velocity, *message.effort]).all()
+    ((_, diagnostics, _),) = messages["/diagnostics"]
+    (status,) = diagnostics.status
+    assert status.level == 2 and "holding the last finite state" in status.message
+    assert {kv.key: kv.value for kv in status.values}["energy_residual"] == "held"
+
+
 @pytest.mark.parametrize("argv, reason", [
     (["--publish-rate", "30"], "does not divide"),
     (["--publish-rate", "0"], "positive"),
@@ -183,9 +194,9 @@ def writer_for(participant, topic, message_type, qos=None):
                       qos=qos or wire.default_qos(message_type))
 
 
-def wait_matched(writers, timeout=20.0):
+def wait_matched(writers, readers=1, timeout=20.0):
     deadline = time.monotonic() + timeout
-    while not all(w.get_matched_subscriptions() for w in writers):
+    while not all(len(w.get_matched_subscriptions()) >= readers for w in writers):
         assert time.monotonic() < deadline, "the recorder never subscribed"
         time.sleep(0.01)
 
@@ -259,6 +270,55 @@ def test_record_writes_exactly_what_a_participant_published(tmp_path):
     assert offers["/joint_states"] == [JAZZY_DEFAULT_OFFER]
     assert offers["/target"] == [JAZZY_DEFAULT_OFFER | {
         "durability": "transient_local", "deadline": {"sec": 1, "nsec": 500_000_000}}]
+
+
+def test_record_of_the_live_node_equals_the_core_with_the_same_commands(tmp_path):
+    from arm_sim_ros.record import StopRequest, record
+    from arm_sim_ros.transports.dds import DdsArmSimNode
+
+    domain = 50
+    recorder = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+    stop, result = StopRequest(), {}
+    thread = threading.Thread(target=lambda: result.update(
+        record(tmp_path / "bag", dict(NODE_TOPICS), recorder, stop=stop)))
+    thread.start()
+    try:
+        node = DdsArmSimNode({"scene": "release", "step_size": 0.001, "publish_rate": 100.0},
+                             domain_id=domain, config=wire.LOOPBACK_CONFIG,
+                             wall_clock=lambda: 100.0, start_stamp_ns=7_000_000_000)
+        peer = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+        commands = writer_for(peer, "/joint_torque_commands", wire.Float64MultiArray)
+        wait_matched([node.joint_state_writer, node.diagnostics_writer])
+        wait_matched([commands], readers=2)  # the node and the recorder
+        held = {0: [1.0, 0.5], 8: [-0.5, 0.0]}
+        for tick in range(15):
+            if tick in held:
+                commands.write(wire.Float64MultiArray(data=held[tick]))
+                assert node.take_commands(timeout=5.0) == 1
+            node.tick()
+        node.publish_diagnostics()
+        for w in (node.joint_state_writer, node.diagnostics_writer, commands):
+            assert w.wait_for_acks(5_000_000_000)
+    finally:
+        stop.requested = True
+        thread.join(10)
+    assert result == {"/joint_states": 15, "/joint_torque_commands": 2, "/diagnostics": 1}
+    messages, _ = read_bag(tmp_path / "bag")
+    sim = Simulator(load_scene("release").replace(policy="command", step_size=0.001))
+    for tick, (_, message, _) in enumerate(messages["/joint_states"]):
+        if tick in held:
+            sim.set_command(*held[tick])
+        for _ in range(10):
+            sim.step()
+        s = sim.sample()
+        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+        assert stamp == 7_000_000_000 + (tick + 1) * 10_000_000
+        assert message.position.tolist() == list(s.q) and message.velocity.tolist() == list(s.qd)
+        assert message.effort.tolist() == list(s.tau)
+    assert [m.data.tolist() for _, m, _ in messages["/joint_torque_commands"]] == list(held.values())
+    info = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())
+    for topic in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        assert topic["topic_metadata"]["offered_qos_profiles"] == [JAZZY_DEFAULT_OFFER]
 
 
 RECORD_MAIN = "import sys; from arm_sim_ros.cli import main; sys.exit(main(sys.argv[1:]))"
