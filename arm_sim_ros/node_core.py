@@ -291,6 +291,7 @@ class ArmSimCore:
         self.wall_clock = wall_clock
         self.warnings = RateLimitedLog(log, wall_clock)
         self.start_stamp_ns = time.time_ns() if start_stamp_ns is None else start_stamp_ns
+        self.received_commands = 0
         self.refused_commands = 0
         self.late_ticks = 0
         self.command_timeouts = 0
@@ -308,6 +309,8 @@ class ArmSimCore:
 
         self.config = config
         self.sim = Simulator(config.scene)
+        for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
+            self.log.info(event.message)
         self.listens = config.scene.policy in COMMAND_POLICIES
         self.command = (0.0, 0.0)
         self.command_received_at = None     # simulated time of the last good command
@@ -370,6 +373,7 @@ class ArmSimCore:
 
     def on_command(self, data) -> str | None:
         """Take [tau1, tau2] from joint_torque_commands; returns the refusal reason, if any."""
+        self.received_commands += 1
         reason = self._refusal(data)
         if reason is not None:
             self.refused_commands += 1
@@ -439,13 +443,13 @@ class ArmSimCore:
             sim.step()
             if recorder is not None:
                 self._call_recorder("step", sim)
-        if getattr(sim, "holding", False) or not all(isfinite(v) for v in sim.state):
-            # Keep publishing the last finite state rather than a non-finite number.
+        if sim.holding or not all(isfinite(v) for v in sim.state):
+            # The simulator refused a step that would leave the finite numbers; hold the
+            # whole tick so joint_states never carries a non-finite number.
             sim.state, sim.steps = before
             self.held = True
-            self.log.error(f"integration cannot stay finite after t = {sim.time:.6f} s "
-                           "(step_size too large for this motion?); holding the last finite "
-                           "state until reset")
+            self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
+                           f"{sim.time:.6f} s); holding until reset")
             self._call_recorder("event", "integration not finite: holding")
             return
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
@@ -501,6 +505,7 @@ class ArmSimCore:
             ("sim_time", f"{self.sim.time:.6f}"), ("real_time_factor", f"{rtf:.3f}"),
             ("energy_residual", residual),
             ("max_abs_energy_residual", f"{self.max_abs_residual:.3e}"),
+            ("received_commands", str(self.received_commands)),
             ("refused_commands", str(self.refused_commands)), ("late_ticks", str(self.late_ticks)),
             ("command_timeouts", str(self.command_timeouts)),
             ("command", f"{self.command[0]:g} {self.command[1]:g}"),

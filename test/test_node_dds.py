@@ -395,3 +395,62 @@ def test_arm_sim_node_process_publishes_to_a_ros_peer_on_localhost(tmp_path):
     assert {b - a for a, b in zip(stamps, stamps[1:])} == {20_000_000}
     assert "scene damped_release started" in err
     assert "t =     1.500 s" in out.splitlines()[-1] and "refused commands 0" in out
+
+
+# --- telemetry hook ----------------------------------------------------------------------------
+
+class RecorderSpy:
+    """The recorder protocol (start, step after every physics step, event, finish), counted."""
+
+    def __init__(self):
+        self.calls = []
+
+    def start(self, sim):
+        self.calls.append(("start", sim.steps))
+
+    def step(self, sim):
+        self.calls.append(("step", sim.steps))
+
+    def event(self, text):
+        self.calls.append(("event", text))
+
+    def finish(self, sim):
+        self.calls.append(("finish", sim.steps))
+
+
+def test_recorder_sees_every_physics_step_and_the_events():
+    spy = RecorderSpy()
+    core = node_core.ArmSimCore(
+        node_core.resolve_parameters({"step_size": 0.002, "command_timeout": 0.02}),
+        logging.getLogger("t"), recorder=spy)
+    core.on_command([1.0, 0.0])
+    core.on_command([math.nan, 0.0])
+    for _ in range(3):
+        core.tick()
+    core.reset()
+    core.finish()
+    steps = [n for kind, n in spy.calls if kind == "step"]
+    assert steps == list(range(1, 16))          # 3 ticks x 5 steps, each seen once, in order
+    events = [text for kind, text in spy.calls if kind == "event"]
+    assert events[0].startswith("scene release started")
+    assert any("refused command: tau1 = nan" in e for e in events)
+    assert any("command timeout" in e for e in events)
+    assert events[-1] == "reset to the scene's initial state"
+    assert spy.calls[-1] == ("finish", 0) and [c for c in spy.calls if c[0] == "start"] == [
+        ("start", 0), ("start", 0)]
+
+
+def test_rerun_path_parameter_writes_a_recording_of_the_node(tmp_path):
+    pytest.importorskip("arm_sim_ros.telemetry")
+    rr = pytest.importorskip("rerun")
+    path = tmp_path / "node.rrd"
+    core = node_core.ArmSimCore(node_core.resolve_parameters({"rerun_path": str(path)}),
+                                logging.getLogger("t"))
+    core.on_command([1.0])
+    for _ in range(20):
+        core.tick()
+    core.finish()
+    reader = rr.chunk.RrdReader(str(path))
+    recording, = reader.recordings()
+    entities = {chunk.entity_path.lstrip("/") for chunk in reader.stream(store=recording)}
+    assert {"energy/total", "energy/balance_residual", "events"} <= entities

@@ -22,6 +22,8 @@ from ..node_core import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, N
                          ArmSimCore, DiagnosticData, JointStateData, resolve_parameters,
                          split_stamp)
 
+CATCH_UP = 0.05   # wall seconds of lag made up by ticking back to back (scheduler jitter)
+
 
 def resolve_name(name: str, namespace: str = "/", remap: dict | None = None) -> str:
     """A ROS topic name made absolute in `namespace`, after `-r from:=to` remapping."""
@@ -118,8 +120,9 @@ class DdsArmSimNode:
     def spin(self, duration_s: float | None = None, on_status=None) -> None:
         """Tick at publish_rate x real_time_factor (as fast as possible when 0) until
         `duration_s` of simulated time has passed, or forever. Once a wall second: diagnostics
-        and `on_status(line)`. A tick that comes late is counted, not made up: the schedule
-        restarts from now rather than bursting to catch up."""
+        and `on_status(line)`. A late tick is counted; ticks then follow back to back until
+        the schedule is met again, unless it is more than CATCH_UP behind, when the schedule
+        restarts from now instead of bursting. Every tick is exactly steps_per_tick steps."""
         config = self.core.config
         ticks = None if duration_s is None else math.ceil(duration_s / config.tick_period - 1e-9)
         period = config.wall_period
@@ -134,7 +137,7 @@ class DdsArmSimNode:
             self.tick(now)
             done += 1
             next_tick += period
-            if next_tick < now - period:  # more than a tick behind: restart the schedule
+            if next_tick < now - max(period, CATCH_UP):  # far behind: restart the schedule
                 next_tick = now
             if now >= next_status:
                 self._status(now, on_status)
