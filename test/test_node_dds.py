@@ -20,8 +20,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from arm_sim_ros import node_core, ros_messages as msg, transports
 from arm_sim_ros.node import load_params_file, main as node_main, node_parameters, parse_ros_args
-from arm_sim_ros.simulator import Simulator
 from arm_sim_ros.transports.dds import DdsArmSimNode
+from node_oracle import assert_matches, expected_states
 
 TIMEOUT = 5.0   # generous bound on loopback delivery; a passing test waits ~1 ms
 
@@ -78,30 +78,12 @@ def start(domain_id, clock=None, **parameters):
     return node, peer
 
 
-def expected_states(scene, schedule, steps_per_tick):
-    """[(q, qd, tau)] after each tick from a core Simulator; schedule: per tick, a command or None."""
-    sim, out = Simulator(scene), []
-    for command in schedule:
-        if command is not None:
-            sim.set_command(*command)
-        for _ in range(steps_per_tick):
-            sim.step()
-        y = sim.state
-        out.append(([y[0], y[1]], [y[2], y[3]], list(sim.dynamics.applied_torque(y[:2]))))
-    return out
-
-
 def run_ticks(node, peer, schedule):
     for command in schedule:
         if command is not None:
             peer.send(node, command)
         node.tick()
     return peer.read(peer.joint_states, len(schedule), msg.JointState)
-
-
-def assert_matches(received, expected):
-    for message, (q, qd, tau) in zip(received, expected):
-        assert (message.position, message.velocity, message.effort) == (q, qd, tau)
 
 
 def test_joint_states_match_the_core_stepped_with_the_same_held_commands():

@@ -19,8 +19,8 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from arm_sim_ros import node_core  # noqa: E402
-from arm_sim_ros.simulator import Simulator  # noqa: E402
 from arm_sim_ros.transports.rclpy_transport import ArmSimNode  # noqa: E402
+from node_oracle import assert_matches, expected_states  # noqa: E402
 
 TIMEOUT = 5.0
 
@@ -95,24 +95,6 @@ def run_ticks(node, peer, schedule):
         node.on_tick()
     peer.spin_until(lambda: len(peer.joint_states) >= len(schedule))
     return peer.joint_states
-
-
-def expected_states(scene, schedule, steps_per_tick):
-    sim, out = Simulator(scene), []
-    for command in schedule:
-        if command is not None:
-            sim.set_command(*command)
-        for _ in range(steps_per_tick):
-            sim.step()
-        y = sim.state
-        out.append(([y[0], y[1]], [y[2], y[3]], list(sim.dynamics.applied_torque(y[:2]))))
-    return out
-
-
-def assert_matches(received, expected):
-    assert len(received) == len(expected)
-    for message, (q, qd, tau) in zip(received, expected):
-        assert (list(message.position), list(message.velocity), list(message.effort)) == (q, qd, tau)
 
 
 @pytest.mark.parametrize("ros", [21], indirect=True)
