@@ -19,6 +19,8 @@ from .scene import Scene, SceneError, load_scene, parse_value, preset_names
 # Modules that contribute subcommands of their own (each defines add_parser).
 SUBCOMMAND_MODULES: list[str] = ["arm_sim_ros.record", "arm_sim_ros.send_torque"]
 
+SUBCOMMAND_MODULES += ["arm_sim_ros.study", "arm_sim_ros.batch"]   # accuracy, batch
+
 CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
                "work", "dissipated", "residual")
 

@@ -1,0 +1,282 @@
+"""What accuracy costs: a work-precision study of every integrator on any scene.
+
+Each method runs the scene at several step sizes (embedded pairs: several tolerances at
+the scene's publish step) and is compared with a high-accuracy reference, scipy's DOP853
+at rtol = atol = 1e-13, at the same physical times. The reference is built from
+`model.forward_dynamics`, not from the generated right-hand side, so it also checks that
+code. Reported per run: max state error, energy drift, balance residual, right-hand-side
+evaluations and CPU seconds per simulated second; per fixed-step method, the fitted
+convergence order.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass
+from math import isfinite, log
+
+from . import model
+from .integrators import INTEGRATORS, compile_step
+from .scene import Scene, SceneError
+from .simulator import Simulator
+
+REFERENCE_TOLERANCE = 1e-13
+DEFAULT_STEPS = (0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125, 0.00015625)
+DEFAULT_TOLERANCES = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
+# Errors used to fit an order: below, the reference and round-off dominate; above, the
+# method is not yet in its asymptotic regime.
+ORDER_FIT_RANGE = (1e-11, 0.3)
+MIN_TIMED_CPU_S = 0.05          # repeat short runs until this much CPU time, keep the fastest
+
+
+@dataclass
+class Run:
+    integrator: str
+    step_size: float
+    tolerance: float | None       # None for fixed-step methods
+    max_state_error: float        # max over sample times and q1, q2, qd1, qd2 of |y - y_ref|
+    energy_drift: float           # max over sample times of |E - E_ref| (J)
+    balance_residual: float       # max over every step of |E - E(0) - W + dissipated| (J)
+    rhs_evaluations: int
+    cpu_s_per_sim_s: float
+
+
+def sample_times(scene: Scene, duration: float, interval: float) -> list[float]:
+    count = scene.steps_for(duration, interval)
+    return [k * interval for k in range(count + 1)]
+
+
+def reference(scene: Scene, times) -> list[tuple]:
+    """(q1, q2, qd1, qd2, *channels) at `times` from scipy's DOP853 at rtol = atol = 1e-13."""
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    sim = Simulator(scene)
+    arm, gravity, damping = scene.arm, scene.gravity, scene.damping
+    torque_of = sim.dynamics.applied_torque
+    channels = sim.channels
+
+    def rates(t, y):
+        q, qd = (y[0], y[1]), (y[2], y[3])
+        tau = torque_of(q)
+        qdd = model.forward_dynamics(arm, q, qd, tau, gravity, damping)
+        books = {"work": tau[0] * qd[0] + tau[1] * qd[1],
+                 "dissipated": damping * (qd[0] * qd[0] + qd[1] * qd[1])}
+        return [qd[0], qd[1], qdd[0], qdd[1], *(books[c] for c in channels)]
+
+    solution = solve_ivp(rates, (times[0], times[-1]), list(sim.state), method="DOP853",
+                         t_eval=times, rtol=REFERENCE_TOLERANCE, atol=REFERENCE_TOLERANCE)
+    if not solution.success:
+        raise SceneError(f"the reference integration failed: {solution.message}")
+    return [tuple(row) for row in np.asarray(solution.y).T]
+
+
+class _Counted:
+    """f with a call counter (used only in the untimed pass)."""
+
+    def __init__(self, f):
+        self.f, self.calls = f, 0
+
+    def __call__(self, *y):
+        self.calls += 1
+        return self.f(*y)
+
+
+def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, times,
+            ref) -> Run:
+    """One method at one step size (or tolerance) against the reference samples."""
+    sim = Simulator(scene.replace(integrator=name, step_size=step_size))
+    tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
+    step = compile_step(INTEGRATORS[name], len(sim.channels), **tolerances)
+    every = scene.steps_for(times[1] - times[0], step_size) if len(times) > 1 else 1
+    total = every * (len(times) - 1)
+    y0 = sim.state
+
+    # Untimed pass: evaluations, the balance residual after every step, the samples.
+    counted = _Counted(sim.dynamics.function)
+    y, samples, residual = y0, [y0], 0.0
+    for n in range(1, total + 1):
+        y = step(counted, y, step_size)
+        sim.state = y
+        residual = max(residual, abs(sim.residual()))
+        if n % every == 0:
+            samples.append(y)
+    sim.state = y0
+
+    # Timed pass: stepping and sampling only, the fastest of a few repeats.
+    f, best, spent = sim.dynamics.function, float("inf"), 0.0
+    while spent < MIN_TIMED_CPU_S or best == float("inf"):
+        start = time.process_time()
+        y, kept = y0, []
+        for n in range(1, total + 1):
+            y = step(f, y, step_size)
+            if n % every == 0:
+                kept.append(y)
+        elapsed = time.process_time() - start
+        best, spent = min(best, elapsed), spent + elapsed
+
+    def worst(values):
+        # A non-finite result is infinitely wrong, not silently skipped by max().
+        return max((v if isfinite(v) else float("inf") for v in values), default=0.0)
+
+    state_error = worst(abs(a - b) for s, r in zip(samples, ref) for a, b in zip(s[:4], r[:4]))
+    drift = worst(abs(sim.energy(s) - sim.energy(r)) for s, r in zip(samples, ref))
+    duration = times[-1] - times[0]
+    return Run(name, step_size, tolerance, state_error, drift,
+               residual if isfinite(residual) else float("inf"),
+               counted.calls, best / duration if duration > 0 else 0.0)
+
+
+def fitted_order(runs: list[Run]) -> float | None:
+    """Least-squares slope of log(error) against log(h) over the asymptotic points."""
+    low, high = ORDER_FIT_RANGE
+    points = [(log(r.step_size), log(r.max_state_error)) for r in runs
+              if low < r.max_state_error < high]
+    if len({x for x, _ in points}) < 2:
+        return None
+    mx = sum(x for x, _ in points) / len(points)
+    my = sum(y for _, y in points) / len(points)
+    return (sum((x - mx) * (y - my) for x, y in points)
+            / sum((x - mx) ** 2 for x, _ in points))
+
+
+def study(scene: Scene, duration: float, integrators, steps, tolerances, progress=None) -> dict:
+    """Every requested run plus fitted orders; `progress(done, total, label)` if given."""
+    fixed = [n for n in integrators if not INTEGRATORS[n].adaptive]
+    adaptive = [n for n in integrators if INTEGRATORS[n].adaptive]
+    plan = ([(n, h, None) for n in fixed for h in steps]
+            + [(n, scene.step_size, tol) for n in adaptive for tol in tolerances])
+    interval = max([h for _, h, _ in plan] + [scene.step_size])
+    times = sample_times(scene, duration, interval)
+    for _, h, _ in plan:
+        scene.steps_for(interval, h)          # every method must land on the sample times
+    ref = reference(scene, times)
+    runs = []
+    for i, (name, h, tol) in enumerate(plan):
+        if progress:
+            progress(i, len(plan), f"{name} {'h' if tol is None else 'tol'}={tol or h:g}")
+        runs.append(measure(scene, name, h, tol, times, ref))
+    if progress:
+        progress(len(plan), len(plan), "done")
+    orders = {n: fitted_order([r for r in runs if r.integrator == n]) for n in fixed}
+    return {"scene": scene.name, "duration": duration, "sample_interval": interval,
+            "reference": f"scipy solve_ivp DOP853 rtol=atol={REFERENCE_TOLERANCE:g}",
+            "runs": [asdict(r) for r in runs],
+            "orders": {n: {"fitted": o, "theory": INTEGRATORS[n].order} for n, o in orders.items()}}
+
+
+def format_table(result: dict) -> str:
+    header = (f"{'method':<20} {'h (s)':>9} {'tol':>7} {'max |state err|':>15} "
+              f"{'energy drift J':>14} {'residual J':>10} {'rhs evals':>9} {'CPU s/sim s':>11}")
+    lines = [f"scene {result['scene']}, {result['duration']:g} s, compared every "
+             f"{result['sample_interval']:g} s with {result['reference']}", header,
+             "-" * len(header)]
+    for r in result["runs"]:
+        tol = "" if r["tolerance"] is None else f"{r['tolerance']:.0e}"
+        lines.append(f"{r['integrator']:<20} {r['step_size']:>9g} {tol:>7} "
+                     f"{r['max_state_error']:>15.3e} {r['energy_drift']:>14.3e} "
+                     f"{r['balance_residual']:>10.2e} {r['rhs_evaluations']:>9d} "
+                     f"{r['cpu_s_per_sim_s']:>11.2e}")
+    lines.append("")
+    for name, o in result["orders"].items():
+        fitted = "n/a (too few points in range)" if o["fitted"] is None else f"{o['fitted']:.2f}"
+        lines.append(f"fitted order {name:<20} {fitted}  (theory {o['theory']})")
+    return "\n".join(lines)
+
+
+def cheapest(result: dict, target: float):
+    """The run reaching max state error <= target at the least CPU time, or None."""
+    good = [r for r in result["runs"] if r["max_state_error"] <= target]
+    return min(good, key=lambda r: r["cpu_s_per_sim_s"], default=None)
+
+
+def plot(result: dict, path: str) -> None:
+    """Work-precision diagram: max state error against CPU time, log-log, one line per method."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8.5, 5.5), dpi=100)
+    markers = "osD^v<>p"
+    names = list(dict.fromkeys(r["integrator"] for r in result["runs"]))
+    for i, name in enumerate(names):
+        runs = [r for r in result["runs"] if r["integrator"] == name
+                and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
+        order = result["orders"].get(name, {}).get("fitted")
+        label = name + (f" (order {order:.2f})" if order is not None else
+                        " (tolerance 1e-4 … 1e-12)" if runs and runs[0]["tolerance"] else "")
+        ax.loglog([r["cpu_s_per_sim_s"] for r in runs], [r["max_state_error"] for r in runs],
+                  marker=markers[i % len(markers)], label=label)
+    ax.axhline(1e-6, color="grey", linestyle=":", linewidth=1)
+    ax.set_xlabel("CPU seconds per simulated second (lower is cheaper)")
+    ax.set_ylabel("max |state error| vs DOP853 reference")
+    ax.set_title(f"What accuracy costs: scene {result['scene']}, {result['duration']:g} s")
+    ax.grid(True, which="major", alpha=0.4)
+    ax.legend(fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _progress_bar(done: int, total: int, label: str) -> None:
+    width = 30
+    filled = width * done // max(total, 1)
+    end = "\n" if done == total else ""
+    print(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label:<28}",
+          end=end, file=sys.stderr, flush=True)
+
+
+def _positive_list(values, what: str, below: float | None = None) -> list[float]:
+    for v in values:
+        if not (isfinite(v) and v > 0 and (below is None or v < below)):
+            limit = f" and below {below:g}" if below is not None else ""
+            raise SceneError(f"{what} {v:g} must be a finite number above 0{limit}")
+    return list(values)
+
+
+def cmd_accuracy(args) -> int:
+    from .cli import UsageError, scene_from_args
+
+    scene = scene_from_args(args)
+    unknown = [n for n in args.integrators if n not in INTEGRATORS]
+    if unknown:
+        raise UsageError(f"unknown integrator {unknown[0]!r}; choose from {', '.join(INTEGRATORS)}")
+    steps = _positive_list(args.steps, "step size")
+    tolerances = _positive_list(args.tolerances, "tolerance", below=1.0)
+    if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration {args.duration:g} must be a positive number of seconds")
+    result = study(scene, args.duration, args.integrators, steps, tolerances, _progress_bar)
+    print(format_table(result))
+    best = cheapest(result, 1e-6)
+    if best:
+        print(f"cheapest run with max state error <= 1e-6: {best['integrator']} "
+              f"h={best['step_size']:g}" + (f" tol={best['tolerance']:g}" if best["tolerance"] else "")
+              + f" ({best['cpu_s_per_sim_s']:.2e} CPU s per simulated s)")
+    for path, write in ((args.json, lambda p: open(p, "w").write(json.dumps(result, indent=1))),
+                        (args.plot, lambda p: plot(result, p))):
+        if path:
+            try:
+                write(path)
+            except OSError as error:
+                raise UsageError(f"cannot write {path}: {error.strerror}") from None
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    from .cli import add_scene_arguments
+
+    p = subparsers.add_parser("accuracy", help="work-precision study: error, drift and CPU cost "
+                                               "of every integrator against a DOP853 reference")
+    add_scene_arguments(p)
+    p.add_argument("--duration", type=float, default=2.0, help="simulated seconds (default 2)")
+    p.add_argument("--integrators", nargs="+", default=list(INTEGRATORS), metavar="NAME",
+                   help=f"methods to compare (default all: {' '.join(INTEGRATORS)})")
+    p.add_argument("--steps", nargs="+", type=float, default=list(DEFAULT_STEPS), metavar="H",
+                   help="step sizes for fixed-step methods (each must divide the largest)")
+    p.add_argument("--tolerances", nargs="+", type=float, default=list(DEFAULT_TOLERANCES),
+                   metavar="TOL", help="rtol = atol values for embedded pairs, stepping at the "
+                                       "scene's publish step")
+    p.add_argument("--json", metavar="PATH", help="write every run and the fitted orders as JSON")
+    p.add_argument("--plot", metavar="PATH", help="write the work-precision diagram as PNG")
+    p.set_defaults(func=cmd_accuracy)

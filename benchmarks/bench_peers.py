@@ -1,0 +1,177 @@
+"""Our arm side by side with the same arm in MuJoCo, timed in the same run.
+
+The MuJoCo model is built from the scene: hinges about z, gravity along -y, each rod's
+inertia given explicitly (COM inertia about z from the scene, about the rod axis tiny but
+non-zero so the body is valid), no contacts. Built this way MuJoCo's RK4 reproduces ours
+to ~1e-15. Errors are the max state error against the DOP853 reference (study.reference)
+at every publish time; times are the fastest of --repeat runs; ratios are against ours.
+
+    pip install .[bench]
+    python benchmarks/bench_peers.py [--scene release] [--duration 2] [--arms 1000000]
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from arm_sim_ros.batch import Batch
+from arm_sim_ros.scene import load_scene
+from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.study import reference, sample_times
+
+AXIAL_INERTIA = 1e-9     # about the rod axis: physically ~0 for a thin rod, must be > 0
+
+
+def mjcf(scene, integrator: str) -> str:
+    """MJCF for the scene's arm (zero torque policy; joint damping = scene damping)."""
+    (l1, l2), (m1, m2), (r1, r2), (i1, i2) = (scene.link_lengths, scene.link_masses,
+                                              scene.com_distances, scene.com_inertias)
+
+    def link(name, length, mass, com, inertia, child=""):
+        return (f'<body name="{name}"><joint name="{name}_joint" type="hinge" axis="0 0 1" '
+                f'damping="{scene.damping!r}"/>'
+                f'<geom type="capsule" fromto="0 0 0 {length!r} 0 0" size="0.02" contype="0" '
+                f'conaffinity="0"/>'
+                f'<inertial pos="{com!r} 0 0" mass="{mass!r}" '
+                f'diaginertia="{AXIAL_INERTIA!r} {inertia!r} {inertia!r}"/>{child}</body>')
+
+    inner = link("link2", l2, m2, r2, i2).replace('<body name="link2"',
+                                                   f'<body name="link2" pos="{l1!r} 0 0"', 1)
+    return (f'<mujoco model="arm_sim_ros"><option timestep="{scene.step_size!r}" '
+            f'integrator="{integrator}" gravity="0 {-scene.gravity!r} 0"/>'
+            f'<worldbody>{link("link1", l1, m1, r1, i1, inner)}</worldbody></mujoco>')
+
+
+def fastest(run, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        start = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def ours_single(scene, steps: int):
+    sim = Simulator(scene)
+    states = [sim.state[:4]]
+
+    def run():
+        sim.reset()
+        states[1:] = []
+        for _ in range(steps):
+            sim.step()
+            states.append(sim.state[:4])
+    return run, states
+
+
+def mujoco_single(scene, integrator: str, steps: int):
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(mjcf(scene, integrator))
+    data = mujoco.MjData(model)
+    states = []
+
+    def run():
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = scene.initial_positions
+        data.qvel[:] = scene.initial_velocities
+        states[:] = [(*data.qpos, *data.qvel)]
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+            states.append((*data.qpos, *data.qvel))
+    return run, states
+
+
+def max_error(states, ref, every: int) -> float:
+    return max(abs(a - b) for s, r in zip(states[::every], ref) for a, b in zip(s, r[:4]))
+
+
+def single_arm_table(scene, duration: float, repeat: int) -> list[str]:
+    steps = scene.steps_for(duration)
+    times = sample_times(scene, duration, scene.step_size)
+    ref = reference(scene, times)
+    rows = [(f"ours {name} (Simulator.step)", *ours_single(scene.replace(integrator=name), steps))
+            for name in ("rk4", "semi_implicit_euler", "dopri5")]
+    for integrator in ("RK4", "implicitfast", "Euler"):
+        rows.append((f"mujoco {integrator} (mj_step)", *mujoco_single(scene, integrator, steps)))
+    results = []
+    for label, run, states in rows:
+        seconds = fastest(run, repeat)
+        results.append((label, seconds / steps * 1e6, max_error(states, ref, 1)))
+    ours_us = results[0][1]
+    lines = [f"single arm: scene {scene.name}, {steps} steps of {scene.step_size:g} s, fastest of "
+             f"{repeat}; error = max |state - DOP853 reference| at every step",
+             f"{'method':<42} {'us/step':>8} {'time / ours rk4':>15} {'max |state err|':>15}",
+             "-" * 83]
+    lines += [f"{label:<42} {us:>8.2f} {us / ours_us:>15.2f} {err:>15.3e}"
+              for label, us, err in results]
+    # Same schemes, same arm: MuJoCo's RK4 is our rk4, its Euler is our semi-implicit Euler.
+    for ours, theirs, label in ((0, 3, "ours rk4 - mujoco RK4"),
+                                (1, 5, "ours semi_implicit_euler - mujoco Euler")):
+        gap = max(abs(a - b) for s, t in zip(rows[ours][2], rows[theirs][2]) for a, b in zip(s, t))
+        lines.append(f"max |{label}| over the run: {gap:.1e}")
+    return lines
+
+
+def batch_table(scene, arms: int, mujoco_arms: int, steps: int, repeat: int) -> list[str]:
+    import mujoco
+    from mujoco import rollout
+
+    rng = np.random.default_rng(0)
+    positions = np.asarray(scene.initial_positions) + rng.uniform(-0.5, 0.5, (arms, 2))
+    batch = Batch(scene, positions)
+
+    def ours():
+        batch.reset()
+        batch.run(steps)
+    ours_s = fastest(ours, repeat)
+
+    model = mujoco.MjModel.from_xml_string(mjcf(scene, "RK4"))
+    data = mujoco.MjData(model)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    initial = np.zeros((mujoco_arms, mujoco.mj_stateSize(model, spec)))
+    mujoco.mj_getState(model, data, initial[0], spec)
+    initial[:] = initial[0]
+    # FULLPHYSICS = time, qpos, qvel, ...: the same spread of initial poses as ours.
+    initial[:, 1:3] = positions[:mujoco_arms]
+    rollout.rollout(model, data, initial[:2], nstep=steps)          # warm up
+    mujoco_s = fastest(lambda: rollout.rollout(model, data, initial, nstep=steps), repeat)
+    state, _ = rollout.rollout(model, data, initial, nstep=steps)
+    batch.reset()
+    batch.run(steps)
+    ours_final = np.stack(batch.state[:4], axis=1)[:mujoco_arms]
+    gap = float(np.max(np.abs(state[:, -1, 1:5] - ours_final)))
+
+    ours_rate = arms * steps / ours_s
+    mujoco_rate = mujoco_arms * steps / mujoco_s
+    return [f"batch: {steps} RK4 steps, 1 thread each (this machine gives one process about one "
+            "core)",
+            f"{'method':<34} {'arms':>9} {'M arm-steps/s':>13} {'ours / it':>9}",
+            "-" * 68,
+            f"{'ours Batch (numpy, chunked)':<34} {arms:>9} {ours_rate / 1e6:>13.2f} {1.0:>9.2f}",
+            f"{'mujoco.rollout RK4':<34} {mujoco_arms:>9} {mujoco_rate / 1e6:>13.2f} "
+            f"{ours_rate / mujoco_rate:>9.2f}",
+            f"max |ours - mujoco.rollout| after {steps} steps: {gap:.1e}"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="release", choices=["release", "damped_release",
+                                                               "downward_equilibrium"])
+    parser.add_argument("--duration", type=float, default=2.0)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--arms", type=int, default=1_000_000)
+    parser.add_argument("--mujoco-arms", type=int, default=20_000)
+    parser.add_argument("--batch-steps", type=int, default=10)
+    args = parser.parse_args()
+    scene = load_scene(args.scene)
+    print("\n".join(single_arm_table(scene, args.duration, args.repeat)))
+    print()
+    print("\n".join(batch_table(scene, args.arms, args.mujoco_arms, args.batch_steps,
+                                args.repeat)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,120 @@
+"""Batch rollouts equal the single-arm simulator, arm by arm, and refuse what it refuses."""
+import numpy as np
+import pytest
+
+from arm_sim_ros import batch as batch_module, cli
+from arm_sim_ros.batch import Batch
+from arm_sim_ros.scene import SceneError, load_scene
+from arm_sim_ros.simulator import Simulator
+
+RNG = np.random.default_rng(7)
+
+
+def single(scene, steps, command=None):
+    """q1, q2, qd1, qd2, work, dissipated of one arm (0 for an absent channel)."""
+    sim = Simulator(scene)
+    if command is not None:
+        sim.set_command(*command)
+    for _ in range(steps):
+        sim.step()
+    books = dict(zip(sim.channels, sim.state[4:]))
+    return np.array([*sim.state[:4], books.get("work", 0.0), books.get("dissipated", 0.0)])
+
+
+def assert_batch_equals_single(batch, scenes, steps, commands=None):
+    for i, scene in enumerate(scenes):
+        expected = single(scene, steps, None if commands is None else commands[i])
+        got = np.array([*(a[i] for a in batch.state[:4]), batch.channel("work")[i],
+                        batch.channel("dissipated")[i]])
+        assert np.max(np.abs(got - expected)) <= 1e-12, (i, got, expected)
+
+
+@pytest.mark.parametrize("name", ["release", "damped_release", "shoulder_torque_no_gravity",
+                                  "moving_gravity_compensation", "moving_frozen_gravity"])
+def test_batch_equals_single_arm_rk4_for_different_initial_states(name):
+    scene = load_scene(name)
+    q = np.asarray(scene.initial_positions) + RNG.uniform(-1, 1, (5, 2))
+    qd = np.asarray(scene.initial_velocities) + RNG.uniform(-1, 1, (5, 2))
+    b = Batch(scene, q, qd)
+    b.run(50)
+    assert b.time == pytest.approx(0.5)
+    scenes = [scene.replace(initial_positions=tuple(q[i]), initial_velocities=tuple(qd[i]))
+              for i in range(5)]
+    assert_batch_equals_single(b, scenes, 50)
+
+
+def test_batch_equals_single_arm_rk4_for_different_parameters():
+    scene = load_scene("release")
+    n = 4
+    params = {"gravity": RNG.uniform(0, 12, n), "damping": np.array([0.0, 0.1, 0.5, 0.0]),
+              "link_lengths": RNG.uniform(0.5, 1.5, (n, 2)),
+              "link_masses": RNG.uniform(0.5, 2.0, (n, 2)),
+              "com_distances": RNG.uniform(0.2, 0.8, (n, 2)),
+              "com_inertias": RNG.uniform(0.01, 0.2, (n, 2))}
+    b = Batch(scene, count=n, **params)
+    b.run(40)
+    scenes = [scene.replace(**{k: (float(v[i]) if v.ndim == 1 else tuple(v[i]))
+                               for k, v in params.items()}) for i in range(n)]
+    assert_batch_equals_single(b, scenes, 40)
+    assert list(b.channels) == ["dissipated"]            # on, because some arm damps
+    assert b.channel("work").tolist() == [0.0] * n
+
+
+def test_batch_command_policy_holds_per_arm_torques():
+    scene = load_scene("release").replace(policy="command_gravity_compensation")
+    torques = RNG.uniform(-2, 2, (3, 2))
+    b = Batch(scene, count=3)
+    b.set_command(torques[:, 0], torques[:, 1])
+    b.run(30)
+    assert_batch_equals_single(b, [scene] * 3, 30, commands=[tuple(t) for t in torques])
+
+
+def test_batch_spans_several_chunks_and_resets(monkeypatch):
+    monkeypatch.setattr(batch_module, "CHUNK", 3)
+    scene = load_scene("release")
+    q = RNG.uniform(-1, 1, (8, 2))
+    b = Batch(scene, q)
+    b.run(20)
+    first = [a.copy() for a in b.state]
+    scenes = [scene.replace(initial_positions=tuple(q[i])) for i in range(8)]
+    assert_batch_equals_single(b, scenes, 20)
+    b.reset()
+    assert b.steps == 0 and np.array_equal(b.positions, q)
+    b.run(10)
+    b.run(10, threads=2)
+    assert all(np.array_equal(x, y) for x, y in zip(first, b.state))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"positions": [[0.0, float("nan")]]}, "positions of arm 0 is not finite"),
+    ({"positions": np.zeros((3, 3))}, "must have shape"),
+    ({"count": 2, "link_masses": [[1.0, 1.0], [1.0, -1.0]]}, "arm 1: link_masses must be positive"),
+    ({"count": 2, "gravity": [9.81, -1.0]}, "arm 1: gravity"),
+    ({"count": 1, "com_inertias": [[0.0, 0.0]], "com_distances": [[0.5, 0.0]]},
+     "mass matrix becomes singular"),
+    ({"count": 1, "step_size": 0.1}, "cannot vary per arm"),
+    ({"count": 0}, "at least one arm"),
+])
+def test_batch_refuses_what_the_scene_refuses(kwargs, message):
+    with pytest.raises(SceneError, match=message):
+        Batch(load_scene("release"), **kwargs)
+
+
+def test_batch_refuses_other_integrators_and_negative_steps():
+    with pytest.raises(SceneError, match="rk4"):
+        Batch(load_scene("release").replace(integrator="euler"))
+    with pytest.raises(SceneError, match="negative"):
+        Batch(load_scene("release")).run(-1)
+
+
+def test_batch_command_reports_throughput_and_agreement(capsys):
+    assert cli.main(["batch", "--count", "2000", "--duration", "0.1"]) == 0
+    out = capsys.readouterr().out
+    assert "M arm-steps/s" in out and "non-finite arms 0" in out
+    agreement = float(out.rsplit("on 3 arms", 1)[1])
+    assert agreement <= 1e-12
+
+
+def test_batch_command_refuses_bad_counts(capsys):
+    assert cli.main(["batch", "--count", "0"]) == 2
+    assert "at least 1" in capsys.readouterr().err
