@@ -126,7 +126,7 @@ class Simulator:
         try:
             y = self._advance(self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
-            self._refuse(f"overflows the arithmetic ({error})")
+            self._refuse(f"cannot be taken: {error}")
         else:
             total = sum(y)
             if total - total == 0.0 or all(isfinite(v) for v in y):  # inf - inf, NaN are NaN
@@ -152,9 +152,13 @@ class Simulator:
             listener(event)
 
     def energy(self, state) -> float:
+        """Total energy; NaN where it cannot be evaluated (angles near 1e308 make sin fail)."""
         q, qd = state[0:2], state[2:4]
-        return (model.kinetic_energy(self.arm, q, qd)
-                + model.potential_energy(self.arm, q, self.scene.gravity))
+        try:
+            return (model.kinetic_energy(self.arm, q, qd)
+                    + model.potential_energy(self.arm, q, self.scene.gravity))
+        except ValueError:
+            return float("nan")
 
     def residual(self) -> float:
         y = self.state

@@ -19,7 +19,7 @@ passive but 0.1-0.5 rad away from scipy's Radau.
 from __future__ import annotations
 
 from fractions import Fraction
-from math import ceil, pi, sqrt
+from math import ceil, hypot, pi
 
 from .integrators import RK4, ButcherTableau
 from .model import ArmParameters, mass_matrix
@@ -27,6 +27,8 @@ from .model import ArmParameters, mass_matrix
 # Sub-steps aim at this fraction of the limit: R(-0.72 x 2.785) = R(-2.0) = 1/3 damps the
 # fast mode, while right at the limit R = +1 would leave it ringing undamped.
 SUBSTEP_FRACTION = 0.72
+# Beyond this a single step would take seconds of CPU (~3 us per sub-step): refused, not run.
+MAX_SUBSTEPS = 100_000
 
 
 def stability_polynomial(tableau: ButcherTableau) -> list[Fraction]:
@@ -68,7 +70,7 @@ RK4_REAL_LIMIT = real_stability_limit(RK4)
 def inverse_mass_eigenvalue(m11: float, m12: float, m22: float) -> float:
     """Largest eigenvalue of M^-1 = 1 / smallest eigenvalue of M, written without cancellation."""
     half_trace = 0.5 * (m11 + m22)
-    spread = sqrt(0.25 * (m11 - m22) ** 2 + m12 * m12)
+    spread = hypot(0.5 * (m11 - m22), m12)
     return (half_trace + spread) / (m11 * m22 - m12 * m12)
 
 
@@ -87,14 +89,24 @@ def worst_stiffness(arm: ArmParameters) -> float:
 
 
 def substeps_needed(ratio: float, limit: float) -> int:
-    """Sub-steps for a step whose d h Lambda is `ratio`: 1 (plain RK4) while it is stable."""
-    return 1 if ratio <= limit else ceil(ratio / (SUBSTEP_FRACTION * limit))
+    """Sub-steps for a step whose d h Lambda is `ratio`: 1 (plain RK4) while it is stable;
+    anything above MAX_SUBSTEPS (even an infinite ratio) counts as MAX_SUBSTEPS + 1."""
+    if ratio <= limit:
+        return 1
+    needed = ratio / (SUBSTEP_FRACTION * limit)
+    return ceil(needed) if needed <= MAX_SUBSTEPS else MAX_SUBSTEPS + 1   # NaN lands here too
 
 
 def substepping(step, substeps: int):
-    """step(f, y, h) as `substeps` equal steps of h / substeps; `step` itself when 1."""
+    """step(f, y, h) as `substeps` equal steps of h / substeps; `step` itself when 1.
+    Past MAX_SUBSTEPS every step raises ValueError instead of freezing its caller."""
     if substeps == 1:
         return step
+    if substeps > MAX_SUBSTEPS:
+        def refuse(f, y, h):
+            raise ValueError(f"it needs more than {MAX_SUBSTEPS} sub-steps to stay stable; "
+                             "reduce step_size or damping")
+        return refuse
 
     def advance(f, y, h):
         h_sub = h / substeps
