@@ -11,8 +11,10 @@ Messages are Python dataclasses: pass lists (not numpy arrays) to sequence field
 """
 
 import os
+import sys
 from dataclasses import dataclass, field
-from xml.sax.saxutils import quoteattr
+from struct import pack
+from xml.sax.saxutils import escape, quoteattr
 
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.idl import IdlStruct
@@ -70,6 +72,50 @@ class JointState(IdlStruct, typename="sensor_msgs.msg.dds_.JointState_"):
     position: sequence[float64] = field(default_factory=list)
     velocity: sequence[float64] = field(default_factory=list)
     effort: sequence[float64] = field(default_factory=list)
+
+    def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
+        # The node writes one of these every tick: the generic serializer costs ~30 us, as
+        # much as six RK4 steps; the same XCDR1 bytes written out directly cost ~3 us.
+        if buffer is None and endianness is None and not use_version_2 and LITTLE_ENDIAN:
+            return _joint_state_cdr(self)
+        return super().serialize(buffer, endianness, use_version_2)
+
+
+LITTLE_ENDIAN = sys.byteorder == "little"
+_CDR_LE_HEADER = b"\x00\x01\x00\x00"   # encapsulation: plain CDR (XCDR1), little-endian
+
+
+def _joint_state_cdr(message: JointState) -> bytes:
+    """XCDR1 of a JointState; alignment counts from the end of the 4-byte encapsulation."""
+    out = bytearray(_CDR_LE_HEADER)
+
+    def pad(size):
+        out.extend(bytes(-(len(out) - 4) % size))
+
+    def string(text):
+        data = text.encode() + b"\0"
+        pad(4)
+        out.extend(pack("<I", len(data)))
+        out.extend(data)
+
+    def doubles(values):
+        pad(4)
+        out.extend(pack("<I", len(values)))
+        if values:
+            pad(8)
+            out.extend(pack(f"<{len(values)}d", *values))
+
+    stamp = message.header.stamp
+    out.extend(pack("<iI", stamp.sec, stamp.nanosec))
+    string(message.header.frame_id)
+    pad(4)
+    out.extend(pack("<I", len(message.name)))
+    for name in message.name:
+        string(name)
+    doubles(message.position)
+    doubles(message.velocity)
+    doubles(message.effort)
+    return bytes(out)
 
 
 # --- diagnostic_msgs -----------------------------------------------------------------------
@@ -255,13 +301,21 @@ def discovery_config(env=None) -> str:
     return fragment + env.get("CYCLONEDDS_URI", "")
 
 
-LOOPBACK_CONFIG = ("<CycloneDDS><Domain><General><Interfaces>"
-                   "<NetworkInterface address=\"127.0.0.1\"/></Interfaces>"
-                   "<AllowMulticast>false</AllowMulticast></General>"
-                   "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-                   "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
-                   "<Peers><Peer address=\"127.0.0.1\"/></Peers></Discovery></Domain></CycloneDDS>")
-"""Loopback only, for tests and benchmarks: never leaves the machine, never meets the LAN."""
+def loopback_config(tag: str = "") -> str:
+    """Loopback only, for tests and benchmarks: never leaves the machine, never meets the LAN.
+    With a `tag`, only participants configured with the same tag meet, so concurrent test runs
+    on one machine (same domain ids) cannot see each other."""
+    return ("<CycloneDDS><Domain><General><Interfaces>"
+            "<NetworkInterface address=\"127.0.0.1\"/></Interfaces>"
+            "<AllowMulticast>false</AllowMulticast></General>"
+            "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+            "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+            "<Peers><Peer address=\"127.0.0.1\"/></Peers>"
+            + (f"<Tag>{escape(tag)}</Tag>" if tag else "")
+            + "</Discovery></Domain></CycloneDDS>")
+
+
+LOOPBACK_CONFIG = loopback_config()
 
 _configured_domains: dict[int, Domain] = {}
 

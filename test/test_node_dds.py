@@ -24,6 +24,9 @@ from arm_sim_ros.transports.dds import DdsArmSimNode
 from node_oracle import assert_matches, expected_states
 
 TIMEOUT = 5.0   # generous bound on loopback delivery; a passing test waits ~1 ms
+# Loopback, tagged with this process: a concurrent run of these tests elsewhere on the machine
+# (same domain ids) is never discovered.
+CONFIG = msg.loopback_config(f"arm_sim_test_node_dds_{os.getpid()}")
 
 
 class FakeClock:
@@ -38,7 +41,7 @@ class Peer:
     """A separate participant: publishes commands, reads joint_states and /diagnostics."""
 
     def __init__(self, domain_id):
-        self.participant = msg.make_participant(domain_id, msg.LOOPBACK_CONFIG)
+        self.participant = msg.make_participant(domain_id, CONFIG)
         p = self.participant
         deep = lambda t: msg.default_qos(t, depth=1000)  # noqa: E731 (keep every sample)
         self.commands = DataWriter(p, Topic(p, "rt/joint_torque_commands", msg.Float64MultiArray),
@@ -70,7 +73,7 @@ class Peer:
 
 
 def start(domain_id, clock=None, **parameters):
-    node = DdsArmSimNode(parameters, domain_id=domain_id, config=msg.LOOPBACK_CONFIG,
+    node = DdsArmSimNode(parameters, domain_id=domain_id, config=CONFIG,
                          log=logging.getLogger(f"arm_sim.test{domain_id}"),
                          wall_clock=clock or FakeClock(), start_stamp_ns=5_000_000_000)
     peer = Peer(domain_id)
@@ -192,7 +195,7 @@ def test_zero_timeout_holds_a_command_forever():
 ])
 def test_bad_parameters_are_refused_with_a_reason(parameters, name, reason):
     with pytest.raises(node_core.ParameterRefused) as refused:
-        DdsArmSimNode(parameters, domain_id=39, config=msg.LOOPBACK_CONFIG)
+        DdsArmSimNode(parameters, domain_id=39, config=CONFIG)
     assert refused.value.name == name and reason in refused.value.reason
 
 
@@ -358,7 +361,7 @@ def test_arm_sim_node_process_publishes_to_a_ros_peer_on_localhost(tmp_path):
     domain = 20
     peer = Peer(domain)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               CYCLONEDDS_URI=msg.LOOPBACK_CONFIG)
+               CYCLONEDDS_URI=CONFIG)
     process = subprocess.Popen(
         [sys.executable, "-m", "arm_sim_ros.node", "--transport", "dds", "--duration", "1.5",
          "--ros-args", "-p", "publish_rate:=50", "-p", "scene:=damped_release"],

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from cyclonedds.idl import IdlStruct
+from hypothesis import given, settings, strategies as st
 from rosbags.typesys import Stores, get_typestore
 
 from arm_sim_ros import ros_messages as m
@@ -30,6 +32,29 @@ def ours_joint_state():
 def test_joint_state_bytes_equal_rosbags():
     expected = bytes(STORE.serialize_cdr(reference_joint_state(), "sensor_msgs/msg/JointState"))
     assert ours_joint_state().serialize() == expected
+
+
+doubles = st.lists(st.floats(allow_nan=False, width=64), max_size=4)
+names = st.lists(st.text(max_size=12), max_size=4)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(sec=st.integers(-2**31, 2**31 - 1), nanosec=st.integers(0, 2**32 - 1),
+       frame_id=st.text(max_size=9), name=names, position=doubles, velocity=doubles,
+       effort=doubles)
+def test_fast_joint_state_encoder_writes_the_generic_and_rosbags_bytes(
+        sec, nanosec, frame_id, name, position, velocity, effort):
+    ours = m.JointState(header=m.Header(stamp=m.Time(sec, nanosec), frame_id=frame_id),
+                        name=name, position=position, velocity=velocity, effort=effort)
+    reference = T["sensor_msgs/msg/JointState"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+            sec=sec, nanosec=nanosec), frame_id=frame_id),
+        name=name, position=np.array(position, dtype=np.float64),
+        velocity=np.array(velocity, dtype=np.float64), effort=np.array(effort, dtype=np.float64))
+    fast = ours.serialize()
+    assert fast == IdlStruct.serialize(ours)            # cyclonedds' own generic serializer
+    assert fast == bytes(STORE.serialize_cdr(reference, "sensor_msgs/msg/JointState"))
+    assert m.JointState.deserialize(fast) == ours
 
 
 def test_float64_multi_array_bytes_equal_rosbags_both_ways():

@@ -12,6 +12,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -120,11 +121,12 @@ def run(ros_args: list, duration: float | None, status) -> int:
         node = ArmSimNode(status=status)
         while rclpy.ok() and (duration is None or node.core.sim.time < duration - 1e-12):
             rclpy.spin_once(node, timeout_sec=0.1)
-        if node is not None and status is not None:
+        if status is not None:
             status(node.core.status_line(node.core.real_time_factor(node.core.wall_clock())))
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
     finally:
         if node is not None:
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        rclpy.try_shutdown()
     return 0
