@@ -208,7 +208,19 @@ def plot(result: dict, path: str) -> None:
                         " (tolerance 1e-4 … 1e-12)" if runs and runs[0]["tolerance"] else "")
         ax.loglog([r["cpu_s_per_sim_s"] for r in runs], [r["max_state_error"] for r in runs],
                   marker=markers[i % len(markers)], label=label)
+        if name in ("rk4", "dopri5"):     # what each point is, on the lines people pick from
+            labels: dict = {}             # runs with the same result share one label
+            for r in runs:
+                text = f"h={r['step_size']:g}" if r["tolerance"] is None else f"{r['tolerance']:g}"
+                labels.setdefault(r["max_state_error"], [r["cpu_s_per_sim_s"]]).append(text)
+            for error, (cpu, *texts) in labels.items():
+                text = ", ".join(texts) if name == "rk4" else "tol " + ", ".join(texts)
+                ax.annotate(text, (cpu, error), fontsize=7, textcoords="offset points",
+                            xytext=(-6, -10) if name == "rk4" else (4, -11),
+                            ha="right" if name == "rk4" else "left")
     ax.axhline(1e-6, color="grey", linestyle=":", linewidth=1)
+    ax.annotate("1e-6", (1.0, 1e-6), xycoords=("axes fraction", "data"), xytext=(-4, 3),
+                textcoords="offset points", ha="right", fontsize=8, color="grey")
     ax.set_xlabel("CPU seconds per simulated second (lower is cheaper)")
     ax.set_ylabel("max |state error| vs DOP853 reference")
     ax.set_title(f"What accuracy costs: scene {result['scene']}, {result['duration']:g} s")
