@@ -1,0 +1,117 @@
+"""Soak: 10^7 simulator steps across long, fast and stiff runs, then a long node run on DDS
+with a command flood; finiteness, energy drift and resident memory before and after.
+
+Not a test: wall times depend on what else the machine runs.
+
+    python benchmarks/bench_soak.py [--scale 1.0] [--node-seconds 1800]
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import random
+import time
+
+from arm_sim_ros.scene import load_scene
+from arm_sim_ros.simulator import Simulator
+
+CHECK_EVERY = 1000          # energy residual sampled every this many steps
+
+
+def rss_mb() -> float:
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def soak(label, scene, steps):
+    sim = Simulator(scene)
+    before, worst, start = rss_mb(), 0.0, time.perf_counter()
+    for done in range(0, steps, CHECK_EVERY):
+        for _ in range(min(CHECK_EVERY, steps - done)):
+            sim.step()
+        worst = max(worst, abs(sim.residual()))
+    wall = time.perf_counter() - start
+    finite = all(math.isfinite(v) for v in sim.state) and not sim.refused_steps
+    scale = max(abs(sim.initial_energy), 1.0)
+    print(f"{label:34s} {steps:9d} {sim.time:9.0f} {sim.substeps:5d} {wall:8.1f} "
+          f"{wall / steps * 1e6:7.2f} {worst:10.2e} {worst / scale:9.1e} {str(finite):>6s} "
+          f"{before:7.1f} {rss_mb():7.1f}")
+    return steps
+
+
+def simulator_soak(scale: float) -> None:
+    print("simulator soak: 10^7 steps in all (x scale); drift = max |E - E0 - W + loss| sampled "
+          f"every {CHECK_EVERY} steps; RSS MB before/after each run")
+    print(f"{'run':34s} {'steps':>9s} {'sim s':>9s} {'sub':>5s} {'wall s':>8s} {'us/step':>7s} "
+          f"{'drift J':>10s} {'rel':>9s} {'finite':>6s} {'RSS0':>7s} {'RSS1':>7s}")
+    release = load_scene("release").replace(step_size=1e-3)
+    hour = round(3600 * scale / 1e-3)
+    total = soak(f"release, {3600 * scale:g} s at h = 1 ms", release, hour)
+    total += soak(f"spin qd0 = (100, -100), {3600 * scale:g} s",
+                  release.replace(initial_velocities=(100.0, -100.0)), hour)
+    stiff = load_scene("damped_release").replace(damping=50.0, step_size=0.01,
+                                                 initial_velocities=(3.0, -3.0))
+    total += soak("d = 50 at h = 10 ms (sub-stepped)", stiff, round(1e7 * scale) - total)
+    print(f"total steps {total}")
+
+
+def node_soak(seconds: float) -> None:
+    from arm_sim_ros import ros_messages as msg
+    from arm_sim_ros.transports.dds import DdsArmSimNode
+
+    domain = 79
+    node = DdsArmSimNode({"real_time_factor": 0.0, "damping": 0.5}, domain_id=domain,
+                         config=msg.LOOPBACK_CONFIG, log=logging.getLogger("soak"))
+    peer = msg.make_participant(domain, msg.LOOPBACK_CONFIG)
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    writer = DataWriter(peer, Topic(peer, "rt/joint_torque_commands", msg.Float64MultiArray),
+                        qos=msg.default_qos(msg.Float64MultiArray))
+    reader = DataReader(peer, Topic(peer, "rt/joint_states", msg.JointState),
+                        qos=msg.default_qos(msg.JointState))
+    while not writer.get_matched_subscriptions():
+        time.sleep(0.01)
+    rng, hostile = random.Random(6), ([math.nan, 0.0], [math.inf, 1.0], [1.0], [], [1e308, 0.0])
+    sent_bad = received = non_finite = 0
+    ticks = round(seconds * node.core.config.values["publish_rate"])
+    before, start = rss_mb(), time.perf_counter()
+    for tick in range(ticks):
+        if tick % 10 == 0:       # a burst of 9 hostile commands and one good one every 10 ticks
+            for _ in range(9):
+                writer.write(msg.Float64MultiArray(data=list(rng.choice(hostile))))
+            writer.write(msg.Float64MultiArray(data=[rng.uniform(-5, 5), rng.uniform(-2, 2)]))
+            sent_bad += 9
+        node.tick()
+        for sample in reader.take(N=100):
+            if isinstance(sample, msg.JointState):
+                received += 1
+                non_finite += not all(math.isfinite(v) for v in
+                                      sample.position + sample.velocity + sample.effort)
+    wall = time.perf_counter() - start
+    time.sleep(0.2)
+    node.take_commands()
+    core = node.core
+    print(f"\nnode soak on DDS (loopback, domain {domain}): {seconds:g} s simulated, {ticks} ticks")
+    print(f"{'wall s':>8s} {'ticks/s':>8s} {'published':>9s} {'received':>9s} {'non-finite':>10s} "
+          f"{'bad sent':>8s} {'refused':>8s} {'RSS0 MB':>8s} {'RSS1 MB':>8s}")
+    print(f"{wall:8.1f} {ticks / wall:8.0f} {ticks:9d} {received:9d} {non_finite:10d} "
+          f"{sent_bad:8d} {core.refused_commands:8d} {before:8.1f} {rss_mb():8.1f}")
+    node.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scale", type=float, default=1.0, help="fraction of the 10^7 steps")
+    parser.add_argument("--node-seconds", type=float, default=1800.0)
+    args = parser.parse_args()
+    simulator_soak(args.scale)
+    node_soak(args.node_seconds)
+
+
+if __name__ == "__main__":
+    main()
