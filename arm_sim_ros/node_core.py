@@ -15,6 +15,7 @@ from math import isfinite
 
 from .model import ParameterError
 from .scene import FIELD_KINDS, Scene, SceneError, load_scene
+from .simulator import Simulator
 
 NODE_NAME = "arm_sim"
 JOINT_STATES_TOPIC = "joint_states"
@@ -305,8 +306,6 @@ class ArmSimCore:
     # configuration ---------------------------------------------------------------------------
 
     def _configure(self, config: NodeConfig) -> None:
-        from .simulator import Simulator
-
         self.config = config
         self.sim = Simulator(config.scene)
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
@@ -328,10 +327,8 @@ class ArmSimCore:
         config = self.config.with_changes(changes)
         changed = [n for n in SPECS if config.values[n] != self.config.values[n]]
         if any(n in SCENE_PARAMETERS for n in changed):
-            self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
-            self._configure(config)
-            self._event(f"parameters {', '.join(changed)} changed: scene restarted from its "
-                        "initial state")
+            self._restart(config, f"parameters {', '.join(changed)} changed: scene restarted "
+                                  "from its initial state")
         else:
             self.config = config
         if any(n.startswith("rerun_") for n in changed):
@@ -469,10 +466,13 @@ class ArmSimCore:
 
     def reset(self) -> None:
         """Back to the scene's initial state; stamps keep increasing."""
+        self._restart(self.config, "reset to the scene's initial state")
+
+    def _restart(self, config: NodeConfig, why: str) -> None:
         self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
-        self._configure(self.config)
+        self._configure(config)
         self._call_recorder("start", self.sim)
-        self._event("reset to the scene's initial state")
+        self._event(why)
 
     def finish(self) -> None:
         self._call_recorder("finish", self.sim)
