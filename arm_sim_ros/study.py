@@ -27,6 +27,7 @@ DEFAULT_TOLERANCES = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 # Errors used to fit an order: below, the reference and round-off dominate; above, the
 # method is not yet in its asymptotic regime.
 ORDER_FIT_RANGE = (1e-11, 0.3)
+MIN_TOLERANCE = 1e-14
 MIN_TIMED_CPU_S = 0.05          # repeat short runs until this much CPU time, keep the fastest
 
 
@@ -99,7 +100,8 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
     for n in range(1, total + 1):
         y = step(counted, y, step_size)
         sim.state = y
-        residual = max(residual, abs(sim.residual()))
+        books = abs(sim.residual())
+        residual = max(residual, books if isfinite(books) else float("inf"))
         if n % every == 0:
             samples.append(y)
     sim.state = y0
@@ -123,9 +125,8 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
     state_error = worst(abs(a - b) for s, r in zip(samples, ref) for a, b in zip(s[:4], r[:4]))
     drift = worst(abs(sim.energy(s) - sim.energy(r)) for s, r in zip(samples, ref))
     duration = times[-1] - times[0]
-    return Run(name, step_size, tolerance, state_error, drift,
-               residual if isfinite(residual) else float("inf"),
-               counted.calls, best / duration if duration > 0 else 0.0)
+    return Run(name, step_size, tolerance, state_error, drift, residual, counted.calls,
+               best / duration if duration > 0 else 0.0)
 
 
 def fitted_order(runs: list[Run]) -> float | None:
@@ -239,11 +240,11 @@ def _progress_bar(done: int, total: int, label: str) -> None:
           end=end, file=sys.stderr, flush=True)
 
 
-def _positive_list(values, what: str, below: float | None = None) -> list[float]:
+def _positive_list(values, what: str, above: float = 0.0, below: float | None = None) -> list[float]:
     for v in values:
-        if not (isfinite(v) and v > 0 and (below is None or v < below)):
+        if not (isfinite(v) and v > above and (below is None or v < below)):
             limit = f" and below {below:g}" if below is not None else ""
-            raise SceneError(f"{what} {v:g} must be a finite number above 0{limit}")
+            raise SceneError(f"{what} {v:g} must be a finite number above {above:g}{limit}")
     return list(values)
 
 
@@ -255,7 +256,8 @@ def cmd_accuracy(args) -> int:
     if unknown:
         raise UsageError(f"unknown integrator {unknown[0]!r}; choose from {', '.join(INTEGRATORS)}")
     steps = _positive_list(args.steps, "step size")
-    tolerances = _positive_list(args.tolerances, "tolerance", below=1.0)
+    # Below ~1e-14 double precision cannot meet the tolerance (scipy refuses it too).
+    tolerances = _positive_list(args.tolerances, "tolerance", above=MIN_TOLERANCE, below=1.0)
     if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration {args.duration:g} must be a positive number of seconds")
     result = study(scene, args.duration, args.integrators, steps, tolerances, _progress_bar)

@@ -74,7 +74,7 @@ def test_a_diverging_run_counts_as_infinitely_wrong():
     ref = study.reference(scene, times)
     run = study.measure(scene.replace(initial_velocities=(1e200, 1e200)), "euler", 0.25, None,
                         times, ref)
-    assert isinf(run.max_state_error)
+    assert isinf(run.max_state_error) and isinf(run.balance_residual)
 
 
 def test_dopri5_runs_at_the_publish_step_for_each_tolerance():
@@ -116,6 +116,7 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
     (["--steps", "0.01", "0.003"], "not a whole number of steps"),
     (["--steps", "-0.01"], "must be a finite number above 0"),
     (["--tolerances", "2"], "below 1"),
+    (["--tolerances", "1e-300"], "above 1e-14"),
     (["--duration", "nan"], "positive number of seconds"),
     (["--steps", "x"], "invalid float value"),
 ])
