@@ -107,7 +107,8 @@ def single_arm_table(scene, duration: float, repeat: int) -> list[str]:
              "-" * 83]
     lines += [f"{label:<42} {us:>8.2f} {us / ours_us:>15.2f} {err:>15.3e}"
               for label, us, err in results]
-    # Same schemes, same arm: MuJoCo's RK4 is our rk4, its Euler is our semi-implicit Euler.
+    # Same schemes, same arm: MuJoCo's RK4 is our rk4, its Euler is our semi-implicit Euler
+    # (without damping: MuJoCo's Euler integrates joint damping implicitly).
     for ours, theirs, label in ((0, 3, "ours rk4 - mujoco RK4"),
                                 (1, 5, "ours semi_implicit_euler - mujoco Euler")):
         gap = max(abs(a - b) for s, t in zip(rows[ours][2], rows[theirs][2]) for a, b in zip(s, t))
