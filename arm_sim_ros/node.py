@@ -3,13 +3,14 @@
     arm_sim_node [--transport auto|rclpy|dds] [--duration SECONDS] [--quiet]
                  [--ros-args -p NAME:=VALUE ... --params-file FILE -r FROM:=TO ...]
 
-On the dds transport the `--ros-args` are read here, as rcl would read them: parameter files
-first, in order, then `-p` values, later ones winning. Prints a one-line status each second.
+On the dds transport the `--ros-args` are read here and resolved as rclcpp/rclpy resolve them:
+every `/**` assignment (a parameter file's `/**:` section or a `-p`) in command-line order, then
+the node's own sections (`arm_sim:` or `/arm_sim:`), which therefore win. Prints a one-line
+status each second.
 """
 from __future__ import annotations
 
 import argparse
-import fnmatch
 import logging
 import signal
 import sys
@@ -50,7 +51,7 @@ def split_ros_args(argv: list) -> tuple[list, list]:
 
 def parse_ros_args(ros: list) -> dict:
     """`-p`, `--params-file`, `-r` and `--log-level` as rcl reads them."""
-    files, params, remap, level = [], {}, {}, None
+    assignments, remap, level = [], {}, None   # ("file", path) / ("param", name, value), in order
     items = iter(ros)
     for flag in items:
         value = next(items, None)
@@ -58,9 +59,9 @@ def parse_ros_args(ros: list) -> dict:
             raise UsageError(f"--ros-args {flag} needs a value")
         if flag in ("-p", "--param"):
             name, value_text = _assignment(flag, value)
-            params[name] = _yaml_value(name, value_text)
+            assignments.append(("param", name, _yaml_value(name, value_text)))
         elif flag == "--params-file":
-            files.append(value)
+            assignments.append(("file", value))
         elif flag in ("-r", "--remap"):
             source, target = _assignment(flag, value)
             remap[source] = target
@@ -71,7 +72,7 @@ def parse_ros_args(ros: list) -> dict:
         else:
             raise UsageError(f"--ros-args {flag} is not supported on the dds transport "
                              "(supported: -p, --params-file, -r, --log-level)")
-    return {"files": files, "params": params, "remap": remap, "level": level}
+    return {"assignments": assignments, "remap": remap, "level": level}
 
 
 def _assignment(flag: str, text: str) -> tuple[str, str]:
@@ -90,9 +91,10 @@ def _yaml_value(name: str, text: str):
     return "" if value is None else value
 
 
-def load_params_file(path: str, node_name: str = NODE_NAME, namespace: str = "/") -> dict:
-    """The `ros__parameters` that apply to this node: keys `/**`, `node`, `/ns/node`, with
-    `*`/`**` wildcards; nested mappings become dotted names."""
+def read_params_file(path: str, full_name: str) -> tuple[dict, dict]:
+    """(the `/**` parameters, this node's own) of a ROS 2 parameter file. Node keys may be
+    nested namespaces (`robot: arm_sim: ros__parameters:`); nested parameter mappings become
+    dotted names."""
     try:
         with open(path) as stream:
             data = yaml.safe_load(stream) or {}
@@ -102,13 +104,34 @@ def load_params_file(path: str, node_name: str = NODE_NAME, namespace: str = "/"
         raise UsageError(f"--params-file {path} is not valid YAML: {error}") from None
     if not isinstance(data, dict):
         raise UsageError(f"--params-file {path} must map node names to ros__parameters")
-    full_name = namespace.rstrip("/") + "/" + node_name
-    params = {}
-    for key, section in data.items():
-        pattern = "/" + str(key).lstrip("/")
-        if fnmatch.fnmatchcase(full_name, pattern.replace("**", "*")) and isinstance(section, dict):
-            params.update(_flatten(section.get("ros__parameters") or {}))
-    return params
+    wildcard, own = {}, {}
+    for node, params in _node_sections(data):
+        if node == "/**":
+            wildcard.update(params)
+        elif node == full_name:
+            own.update(params)
+    return wildcard, own
+
+
+def _node_sections(data: dict, prefix: str = ""):
+    for key, value in data.items():
+        if not isinstance(value, dict):
+            continue
+        name = prefix + "/" + str(key).strip("/")
+        if "ros__parameters" in value:
+            yield name, _flatten(value["ros__parameters"] or {})
+        else:
+            yield from _node_sections(value, name)
+
+
+def full_node_name(node_name: str = NODE_NAME, namespace: str = "/") -> str:
+    return namespace.rstrip("/") + "/" + node_name
+
+
+def load_params_file(path: str, node_name: str = NODE_NAME, namespace: str = "/") -> dict:
+    """What one parameter file sets for this node."""
+    wildcard, own = read_params_file(path, full_node_name(node_name, namespace))
+    return wildcard | own
 
 
 def _flatten(mapping: dict, prefix: str = "") -> dict:
@@ -122,10 +145,16 @@ def _flatten(mapping: dict, prefix: str = "") -> dict:
 
 
 def node_parameters(ros: dict, node_name: str, namespace: str) -> dict:
-    params = {}
-    for path in ros["files"]:
-        params.update(load_params_file(path, node_name, namespace))
-    params.update(ros["params"])
+    """rclcpp's resolve_parameter_overrides: `/**` values first, then the node's own."""
+    wildcard, own = {}, {}
+    for kind, *what in ros["assignments"]:
+        if kind == "file":
+            file_wildcard, file_own = read_params_file(what[0], full_node_name(node_name, namespace))
+            wildcard.update(file_wildcard)
+            own.update(file_own)
+        else:
+            wildcard[what[0]] = what[1]
+    params = wildcard | own
     params.pop("use_sim_time", None)  # every ROS node has it; the dds node keeps its own clock
     return params
 

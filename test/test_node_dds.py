@@ -311,18 +311,23 @@ def test_reset_restarts_the_scene_and_stamps_keep_increasing():
 
 # --- the command line ----------------------------------------------------------------------
 
-def test_ros_args_params_files_then_p_values_later_wins(tmp_path):
+def test_ros_args_resolve_as_rclcpp_does_wildcards_in_order_then_the_node_own_values(tmp_path):
     first = tmp_path / "a.yaml"
     first.write_text("/**:\n  ros__parameters:\n    damping: 0.1\n    publish_rate: 50.0\n"
+                     "    gravity: 1.0\n"
                      "other_node:\n  ros__parameters:\n    damping: 9.0\n")
     second = tmp_path / "b.yaml"
-    second.write_text("arm_sim:\n  ros__parameters:\n    damping: 0.2\n    use_sim_time: false\n")
-    ros = parse_ros_args(["--params-file", str(first), "--params-file", str(second),
-                          "-p", "gravity:=0", "-p", "initial_positions:=[0.5, 0.0]",
-                          "-p", "frame_id:=base_link", "-r", "__node:=arm_sim"])
+    second.write_text("arm_sim:\n  ros__parameters:\n    damping: 0.2\n    use_sim_time: false\n"
+                      "robot:\n  arm_sim:\n    ros__parameters:\n      frame_id: robot_base\n")
+    ros = parse_ros_args(["-p", "damping:=0.7", "--params-file", str(first),
+                          "--params-file", str(second), "-p", "gravity:=0",
+                          "-p", "initial_positions:=[0.5, 0.0]", "-r", "__node:=arm_sim"])
     assert node_parameters(ros, "arm_sim", "/") == {
-        "damping": 0.2, "publish_rate": 50.0, "gravity": 0, "initial_positions": [0.5, 0.0],
-        "frame_id": "base_link"}
+        "damping": 0.2,             # the node's own section beats every /** value and -p
+        "publish_rate": 50.0,       # /** in a file
+        "gravity": 0,               # a later -p beats an earlier /** file value
+        "initial_positions": [0.5, 0.0]}
+    assert node_parameters(ros, "arm_sim", "/robot")["frame_id"] == "robot_base"
 
 
 def test_params_file_of_the_package_is_accepted():
