@@ -97,9 +97,22 @@ hostile_values = st.one_of(
     st.dictionaries(st.text(max_size=2), hostile_numbers, max_size=1))
 
 
-@settings(max_examples=150, deadline=None, derandomize=True,
+# Values of the parameter's own kind reach the physics (and are often accepted); any value
+# tests the type checks.
+plausible = st.one_of(hostile_numbers, st.floats(1e-3, 1e3), st.floats(-10.0, 10.0))
+OF_KIND = {"float": plausible, "float_pair": st.lists(plausible, min_size=2, max_size=2),
+           "bool": st.booleans(), "str_list": st.lists(st.text(max_size=3), max_size=3),
+           "str": st.sampled_from(["", "rk4", "euler", "nonsense", "command", "constant",
+                                   "gravity_compensation", "base_link"])}
+parameter_changes = st.lists(
+    st.sampled_from(FUZZED).flatmap(lambda name: st.tuples(st.just(name), st.one_of(
+        OF_KIND[node_core.SPECS[name].kind], hostile_values))),
+    min_size=1, max_size=2).map(dict)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
-@given(changes=st.dictionaries(st.sampled_from(FUZZED), hostile_values, min_size=1, max_size=3))
+@given(changes=parameter_changes)
 def test_fuzzed_parameters_are_refused_with_nothing_changed_or_run_finite(changes):
     core = node_core.ArmSimCore(node_core.resolve_parameters({"damping": 0.5}),
                                 logging.getLogger("fuzz"), FakeClock())

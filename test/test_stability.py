@@ -254,3 +254,19 @@ def test_a_large_but_finite_sum_is_not_mistaken_for_overflow():
     sim.state = (1.5e308, 1.5e308, 0.0, 0.0)
     sim.step()
     assert not sim.holding and sim.state[0] == 1.5e308
+
+
+# --- the issue's d x step range on the damped scene --------------------------------------------
+
+@pytest.mark.parametrize("h", [1e-4, 1e-3, 0.01, 0.05])
+@pytest.mark.parametrize("damping", [0.0, 0.01, 0.5, 5.0, 18.5, 50.0, 500.0, 5000.0, 1e4])
+def test_damped_release_is_passive_over_the_whole_range(damping, h):
+    """E(t) <= E(0) + 1e-6 J + the d = 0 run's rise at the same step, for 0.2 s or 2000 steps."""
+    steps = min(2000, round(0.2 / h))
+    scene = DAMPED.replace(damping=damping, step_size=h, initial_velocities=(2.0, -3.0))
+    sim, out = sim_run(scene, steps)
+    assert all(math.isfinite(v) for y in out for v in y) and not sim.refused_steps
+    free = energies(scene, raw_rk4_run(scene.replace(damping=0.0), steps))
+    drift = np.maximum.accumulate(np.maximum(free - free[0], 0.0))
+    e = energies(scene, out)
+    assert (e - e[0] - drift).max() <= 1e-6
