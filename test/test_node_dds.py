@@ -444,3 +444,28 @@ def test_rerun_path_parameter_writes_a_recording_of_the_node(tmp_path):
     recording, = reader.recordings()
     entities = {chunk.entity_path.lstrip("/") for chunk in reader.stream(store=recording)}
     assert {"energy/total", "energy/balance_residual", "events"} <= entities
+
+
+# --- arm-sim send-torque ------------------------------------------------------------------------
+
+def test_send_torque_publisher_drives_the_node():
+    from arm_sim_ros.send_torque import TorquePublisher
+
+    node, _ = start(30, gravity=0.0)
+    publisher = TorquePublisher(domain_id=30, config=CONFIG)
+    assert publisher.wait_for_subscriber(TIMEOUT)
+    publisher.send([1.5, -0.5])
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    assert node.tick().effort == [1.5, -0.5]
+
+
+def test_send_torque_command_line(monkeypatch, capsys):
+    from arm_sim_ros.cli import main as cli_main
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", "31")      # nobody listens on this domain
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("CYCLONEDDS_URI", CONFIG)
+    assert cli_main(["send-torque", "1", "0", "--once", "--wait", "0.2"]) == 1
+    assert "no subscriber on joint_torque_commands" in capsys.readouterr().out
+    assert cli_main(["send-torque", "1", "0", "--rate", "0"]) == 2
+    assert "--rate 0.0 must be a positive number" in capsys.readouterr().err
