@@ -1,10 +1,10 @@
 """Rerun telemetry: the explainer's readouts on simulated time, beside a drawing of the arm.
 
 The only module that imports rerun. Recording must never slow or stop the physics:
-step() only appends the state tuple, and energies, torques and drawings are computed
-for a whole batch with numpy when it is sent (one send_columns per entity). A sink that
-fails (unwritable file, no viewer at the address, a viewer that dies) is one warning;
-the simulation runs on.
+step() only appends the state tuple; a batch of steps goes to a sender thread, which
+computes energies, torques and drawings with numpy and sends one send_columns per
+entity (rerun releases the GIL while it encodes). A sink that fails (unwritable file,
+no viewer at the address, a viewer that dies) is one warning; the simulation runs on.
 
 Channels follow the scene's effects (Simulator.channels): no `energy/dissipated`
 without damping, no `work/actuator` or joint torques without an actuator.
@@ -12,22 +12,26 @@ without damping, no `work/actuator` or joint torques without an actuator.
 from __future__ import annotations
 
 import logging
+import queue
 import socket
+import threading
 import time
+from itertools import chain
 from urllib.parse import urlsplit
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 import rerun.blueprint as rrb
 
-TIMELINE = "sim_time"            # simulated time since the last reset: steps x step_size
-SESSION_TIMELINE = "session_time"  # simulated time summed over resets, so runs follow each other
+TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
 CHECK_EVERY = 256                # steps between looks at the wall clock
 FILE_PERIOD = 1.0                # wall seconds between sends to a file...
 LIVE_PERIOD = 0.1                # ...and to a viewer, which a person is watching
 FLUSH_TIMEOUT = 5.0              # wall seconds finish() waits for a sink before giving up on it
+QUEUED_BATCHES = 8               # batches waiting for the sender before flush() waits: bounds memory
 DEFAULT_PORT = 9876
 
 # Bright enough for the viewer's dark theme; one colour per readout wherever it appears.
@@ -45,8 +49,8 @@ JOINT_SERIES = {
     "joints/torque": ("applied torque (N m)", ("τ1 shoulder", "τ2 elbow")),
 }
 JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
-TRACE_COLOR = (200, 120, 255)
-HORIZON_COLOR = (110, 110, 110)
+TRACE_COLOR = (190, 190, 190)     # neutral: violet is the residual's
+HORIZON_COLOR = (100, 100, 100)
 LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
           "warn": rr.TextLogLevel.WARN, "warning": rr.TextLogLevel.WARN,
           "error": rr.TextLogLevel.ERROR}
@@ -152,9 +156,9 @@ def viewer_reachable(url: str, timeout: float = 0.5) -> bool:
 class RerunRecorder:
     """A recorder for cli.RUN_RECORDERS and the node: start / step / flush / event / finish.
 
-    start(sim) may be called again for a new Simulator (e.g. after the node changes a
-    parameter); a reset is noticed by simulated time going back, and `session_time`
-    keeps such runs one after another.
+    start(sim) may be called again after a reset or for a new Simulator (step() also
+    notices a new one). Simulated time going back (a reset) continues the timeline from
+    where the last run ended, as the node's JointState stamps do, and the trace breaks.
     """
 
     def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
@@ -164,18 +168,23 @@ class RerunRecorder:
         self.live = bool(spawn or connect)
         self._warn = warn or logging.getLogger(__name__).warning
         self._warned = set()
-        self.stream = rr.RecordingStream(application_id)
+        # Batches arrive whole; rerun's own batcher would only split and re-merge them.
+        self.stream = rr.RecordingStream(application_id,
+                                         batcher_config=rr.ChunkBatcherConfig.NEVER())
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
-        self._steps, self._states, self._commands = [], [], []
+        self._rows, self._events = [], []   # (steps, state[, command]) per step; text lines
         self._check_at = CHECK_EVERY
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
-        self._last_t = None       # simulated time of the last row sent
-        self._session_offset = 0.0
+        self._last_raw = -np.inf  # steps x h of the last row sent
+        self._offset = 0.0        # what resets add to steps x h on the timeline
+        self._last_ns = 0         # timeline position of the last row sent
         self._last_tip = None
         self._layout = None       # what the blueprint was drawn for: (channels, arm)
+        self._batches = queue.Queue(maxsize=QUEUED_BATCHES)
+        self._sender = None
 
     # -- protocol ---------------------------------------------------------------------
 
@@ -184,49 +193,61 @@ class RerunRecorder:
         self._bind(sim)
         self.event(f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
                    f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
-                   f"{sim.scene.integrator}, E0 = {sim.initial_energy:.9g} J", at=sim.time)
+                   f"{sim.scene.integrator}, E0 = {sim.initial_energy:.9g} J")
         self.step(sim)
 
     def step(self, sim) -> None:
         """After every physics step: keep the state, nothing else (see flush)."""
         if sim is not self.sim:
             self._bind(sim)
-        self._steps.append(sim.steps)
-        self._states.append(sim.state)
+        rows = self._rows
         if self._commanded:
-            self._commands.append(tuple(sim.dynamics.command))
-        if len(self._states) >= self._check_at:
+            rows.append((sim.steps, sim.state, tuple(sim.dynamics.command)))
+        else:
+            rows.append((sim.steps, sim.state))
+        if len(rows) >= self._check_at:
             self.flush()
 
     def flush(self, sim=None, force: bool = False) -> None:
         """Send the buffered steps when a send is due: a period of wall time has passed
         (LIVE_PERIOD for a viewer, FILE_PERIOD for a file) or BATCH_STEPS are waiting.
         Cheap to call once per tick; step() also calls it every CHECK_EVERY steps."""
-        waiting = len(self._states)
+        waiting = len(self._rows)
         due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + CHECK_EVERY, BATCH_STEPS)
-        if not waiting or not due:
+        if not (waiting or self._events) or not due:
             return
-        steps, states, commands = self._steps, self._states, self._commands
-        self._steps, self._states, self._commands = [], [], []
+        rows, events = self._rows, self._events
+        self._rows, self._events = [], []
         self._check_at = min(CHECK_EVERY, BATCH_STEPS)
         self._last_send = time.monotonic()
-        if self.enabled:
-            self._guard(self._send, np.array(steps, dtype=np.int64), np.array(states),
-                        np.array(commands) if self._commanded else None)
-
-    def event(self, text: str, level: str = "info", at: float | None = None) -> None:
-        """A text-log line at the latest simulated time seen (or `at`)."""
         if not self.enabled:
             return
-        if at is None:
-            at = (self._steps[-1] * self.sim.step_size if self._steps
-                  else self._last_t if self._last_t is not None else 0.0)
-        self._guard(self._log_event, text, LEVELS.get(level.lower(), rr.TextLogLevel.INFO), at)
+        if self._sender is None:
+            self._sender = threading.Thread(target=self._send_batches, name="rerun-telemetry",
+                                            daemon=True)
+            self._sender.start()
+        self._batches.put((self.sim, rows, events))
+
+    def _on_sim_event(self, event) -> None:
+        self.event(f"{event.kind}: {event.message}",
+                   level="error" if event.kind == "fault" else "warn")
+
+    def event(self, text: str, level: str = "info") -> None:
+        """A text-log line, sent with the steps: at the next step recorded (the last one if
+        none follows before a send)."""
+        self._events.append((len(self._rows), str(text),
+                             LEVELS.get(str(level).lower(), rr.TextLogLevel.INFO)))
 
     def finish(self, sim=None) -> None:
         """Send what is buffered and close the sinks, so a file is complete and verifies."""
         self.flush(force=True)
+        if self._sender is not None:
+            self._batches.put(None)
+            self._sender.join()
+            self._sender = None
+        if self.sim is not None and self._on_sim_event in self.sim.event_listeners:
+            self.sim.event_listeners.remove(self._on_sim_event)
         if self.enabled:
             self._guard(self.stream.flush, timeout_sec=FLUSH_TIMEOUT)
             self._guard(self.stream.disconnect)
@@ -267,13 +288,20 @@ class RerunRecorder:
             self.enabled = True
 
     def _bind(self, sim) -> None:
-        """Rows buffered so far belong to the previous simulator: send them first."""
-        if self.sim is not None:
+        """Rows buffered so far belong to the previous simulator: send them first. The
+        simulator's own events (sub-stepping, refused steps) go to the text log."""
+        previous = self.sim
+        if previous is not None:
             self.flush(force=True)
         self.sim = sim
         self._commanded = sim.scene.policy.startswith("command")
-        self._frame_every = max(1, round(FRAME_PERIOD / sim.step_size))
         self._guard(self._describe, sim)
+        if sim is not previous:
+            if previous is not None and self._on_sim_event in previous.event_listeners:
+                previous.event_listeners.remove(self._on_sim_event)
+            for earlier in sim.events:
+                self._on_sim_event(earlier)
+            sim.event_listeners.append(self._on_sim_event)
 
     def _describe(self, sim) -> None:
         """Open the sinks (first time) and log what does not change from step to step."""
@@ -304,12 +332,26 @@ class RerunRecorder:
 
     # -- sending ------------------------------------------------------------------------
 
-    def _send(self, steps, states, commands) -> None:
-        sim = self.sim
-        h = sim.step_size
-        t = steps * h
-        times = (_nanoseconds(t), _nanoseconds(t + self._session_offsets(t, h)))
-        index = _time_columns(times)
+    def _send_batches(self) -> None:
+        """The sender thread: batches in the order flush() queued them, until finish()."""
+        while (batch := self._batches.get()) is not None:
+            if self.enabled:
+                with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
+                    self._guard(self._send, *batch)
+
+    def _send(self, sim, rows, events) -> None:
+        if rows:
+            steps, states, *commands = zip(*rows)
+            self._send_rows(sim, np.fromiter(steps, np.int64, len(steps)), _array(states),
+                            _array(commands[0]) if commands else None)
+        if events:
+            n = len(rows)
+            at = [self._row_ns[min(i, n - 1)] if n else self._last_ns for i, _, _ in events]
+            self._send_columns("events", [_time_column(np.array(at))], rr.TextLog.columns(
+                text=[text for _, text, _ in events], level=[level for _, _, level in events]))
+
+    def _send_rows(self, sim, steps, states, commands) -> None:
+        index = [_time_column(self._timeline(steps * sim.step_size))]
         q1, q2, u1, u2 = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
         kinetic, potential = energies(sim.arm, sim.scene.gravity, q1, q2, u1, u2)
         total = kinetic + potential
@@ -323,65 +365,45 @@ class RerunRecorder:
             values["energy/dissipated"] = dissipated
         if "work" in books:
             values["work/actuator"] = work
-            values["joints/torque"] = self._torques(q1, q2, commands)
-        send = self._send_columns
+            values["joints/torque"] = _torques(sim, q1, q2, commands)
         for path, column in values.items():
-            send(path, index, rr.Scalars.columns(scalars=column))
-        self._send_drawing(steps, q1, q2, times)
-        self._last_t = float(t[-1])
+            self._send_columns(path, index, rr.Scalars.columns(scalars=column))
+        self._send_drawing(sim, steps, q1, q2)
 
-    def _session_offsets(self, t, h):
-        """Per row, what to add to sim_time so that a run after a reset follows the last one."""
-        previous = np.concatenate(([self._last_t if self._last_t is not None else -h], t[:-1]))
-        jumps = np.where(t <= previous, previous - t + h, 0.0)
-        offsets = self._session_offset + np.cumsum(jumps)
-        self._session_offset = float(offsets[-1])
-        self._restarted = jumps > 0.0
-        return offsets
+    def _timeline(self, t):
+        """Each row's position on the timeline in ns: t, plus the simulated time of every run
+        before the last reset (a reset shows as time going back to 0)."""
+        previous = np.concatenate(([self._last_raw], t[:-1]))
+        self._restarted = t <= previous
+        offsets = self._offset + np.cumsum(np.where(self._restarted, previous, 0.0))
+        self._offset, self._last_raw = float(offsets[-1]), float(t[-1])
+        self._row_ns = _nanoseconds(t + offsets)
+        self._last_ns = self._row_ns[-1]
+        return self._row_ns
 
-    def _torques(self, q1, q2, commands):
-        """The applied torque per row, as sim.dynamics.applied_torque gives it at that step."""
-        scene, n = self.sim.scene, len(q1)
-        if commands is not None:
-            tau = commands.astype(float).reshape(n, 2)
-        else:
-            tau = np.tile(self.sim.dynamics.applied_torque((0.0, 0.0)), (n, 1)).astype(float)
-        if scene.policy.endswith("gravity_compensation") and scene.gravity != 0.0:
-            tau = (0.0 if scene.policy == "gravity_compensation" else tau) + gravity_torques(
-                self.sim.arm, scene.gravity, q1, q2)
-        return tau
-
-    def _send_drawing(self, steps, q1, q2, times) -> None:
+    def _send_drawing(self, sim, steps, q1, q2) -> None:
         """Links, joints and the tip's trace every FRAME_PERIOD of simulated time."""
-        frames = np.flatnonzero(steps % self._frame_every == 0)
+        frames = np.flatnonzero(steps % max(1, round(FRAME_PERIOD / sim.step_size)) == 0)
         if frames.size == 0:
             return
-        index = _time_columns([column[frames] for column in times])
-        elbow, tip = drawing_points(self.sim.arm, q1[frames], q2[frames])
+        index = [_time_column(self._row_ns[frames])]
+        elbow, tip = drawing_points(sim.arm, q1[frames], q2[frames])
         base = np.zeros_like(elbow)
-        links = np.stack((np.stack((base, elbow), 1), np.stack((elbow, tip), 1)), 1)
-        self._send_columns("arm/links", index, rr.LineStrips2D.columns(
-            strips=links.reshape(-1, 2, 2)).partition([2] * len(frames)))
+        n = len(frames)
+        self._send_columns("arm/links", index, _strips(
+            np.stack((base, elbow, elbow, tip), 1), strips_per_row=2))
         self._send_columns("arm/joints", index, rr.Points2D.columns(
-            positions=np.stack((base, elbow, tip), 1).reshape(-1, 2)).partition([3] * len(frames)))
+            positions=np.stack((base, elbow, tip), 1).reshape(-1, 2)).partition(np.full(n, 3)))
         # The trace joins consecutive frames, but not across a reset.
         previous = np.concatenate(([self._last_tip if self._last_tip is not None else tip[0]],
                                    tip[:-1]))
         restarted = np.flatnonzero(self._restarted[frames])
         previous[restarted] = tip[restarted]
-        self._send_columns("arm/tip_trace", index, rr.LineStrips2D.columns(
-            strips=np.stack((previous, tip), 1)))
+        self._send_columns("arm/tip_trace", index, _strips(np.stack((previous, tip), 1)))
         self._last_tip = tip[-1]
 
     def _send_columns(self, path, index, columns) -> None:
         rr.send_columns(path, indexes=index, columns=columns, recording=self.stream)
-
-    def _log_event(self, text, level, at) -> None:
-        offset = self._session_offset if self._last_t is None or at > self._last_t else (
-            self._session_offset + self._last_t + self.sim.step_size - at)
-        self.stream.set_time(TIMELINE, duration=at)
-        self.stream.set_time(SESSION_TIMELINE, duration=at + offset)
-        self.stream.log("events", rr.TextLog(text, level=level))
 
     # -- failures -----------------------------------------------------------------------
 
@@ -400,9 +422,42 @@ class RerunRecorder:
             self._warn(message)
 
 
-def _time_columns(times):
-    return [rr.TimeColumn(TIMELINE, duration=times[0]),
-            rr.TimeColumn(SESSION_TIMELINE, duration=times[1])]
+def _torques(sim, q1, q2, commands):
+    """The applied torque per row, as sim.dynamics.applied_torque gives it at that step
+    (`commands`: the held command of each row, for the command policies)."""
+    scene, n = sim.scene, len(q1)
+    if commands is not None:
+        tau = commands.reshape(n, 2)
+    else:
+        tau = np.tile(sim.dynamics.applied_torque((0.0, 0.0)), (n, 1)).astype(float)
+    if scene.policy.endswith("gravity_compensation") and scene.gravity != 0.0:
+        tau = (0.0 if scene.policy == "gravity_compensation" else tau) + gravity_torques(
+            sim.arm, scene.gravity, q1, q2)
+    return tau
+
+
+def _array(tuples):
+    """A list of equal-length tuples as a 2D array (twice as fast as np.array for this)."""
+    width = len(tuples[0])
+    return np.fromiter(chain.from_iterable(tuples), float, len(tuples) * width).reshape(-1, width)
+
+
+def _time_column(ns):
+    return rr.TimeColumn(TIMELINE, duration=ns)
+
+
+def _strips(points, strips_per_row=1):
+    """Two-point line strips, (rows, 2 x strips_per_row, 2) points, as one LineStrips2D
+    column; built as Arrow directly, since rerun converts strip by strip in Python."""
+    kind = rr.components.LineStrip2DBatch._ARROW_DATATYPE
+    flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))
+    vertices = pa.FixedSizeListArray.from_arrays(flat, type=kind.value_type)
+    count = points.shape[0] * strips_per_row
+    strips = pa.ListArray.from_arrays(pa.array(np.arange(0, 2 * count + 1, 2, dtype=np.int32)),
+                                      vertices, type=kind)
+    column = rr.ComponentColumn(rr.LineStrips2D.descriptor_strips(),
+                                rr.components.LineStrip2DBatch(strips))
+    return [column.partition(np.full(points.shape[0], strips_per_row))]
 
 
 def _nanoseconds(seconds):

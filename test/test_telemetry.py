@@ -25,7 +25,7 @@ ALL_CHANNELS = {"energy/kinetic", "energy/potential", "energy/total", "energy/di
 
 
 def read_back(path):
-    """{entity: {column: [values in session_time order]}} of the recording's temporal rows."""
+    """{entity: {column: [values in sim_time order]}} of the recording's temporal rows."""
     reader = rr.chunk.RrdReader(str(path))
     (recording,) = reader.recordings()
     columns = defaultdict(lambda: defaultdict(list))
@@ -45,7 +45,7 @@ def read_back(path):
                 values = [v[0] for v in values]     # one text / one segment per row
             columns[chunk.entity_path.lstrip("/")][field.name] += values
     for entity in columns.values():
-        order = np.argsort(entity["session_time"], kind="stable")
+        order = np.argsort(entity["sim_time"], kind="stable")
         for name in entity:
             entity[name] = [entity[name][i] for i in order]
     return columns
@@ -228,7 +228,21 @@ def test_events_are_logged_at_the_latest_simulated_time(tmp_path):
     assert events["sim_time"] == [0, round(7 * 0.01 * 1e9)]
 
 
-def test_a_reset_restarts_sim_time_and_session_time_runs_on(tmp_path):
+def test_the_simulators_stability_interventions_reach_the_text_log(tmp_path):
+    stiff = load_scene("damped_release").replace(damping=300.0, duration=0.05)
+    wild = load_scene("release").replace(initial_velocities=(1e200, 1e200), duration=0.05)
+    for scene, kind, level in ((stiff, "substepping", "WARN"), (wild, "fault", "ERROR")):
+        samples, _ = record(scene, tmp_path / f"{kind}.rrd")
+        columns = read_back(tmp_path / f"{kind}.rrd")
+        lines = [(text, lvl) for text, lvl in zip(columns["events"]["TextLog:text"],
+                                                  columns["events"]["TextLog:level"])
+                 if text.startswith(kind)]
+        assert len(lines) == 1 and lines[0][1] == level
+        assert np.all(np.isfinite(scalars(columns["joints/velocity"])))   # held, finite
+        assert len(columns["joints/angle"]["sim_time"]) == len(samples)
+
+
+def test_after_a_reset_the_timeline_runs_on_like_the_nodes_stamps(tmp_path):
     scene = load_scene("damped_release")
     sim = Simulator(scene)
     recorder = telemetry.make_recorder(scene, path=str(tmp_path / "reset.rrd"))
@@ -246,10 +260,15 @@ def test_a_reset_restarts_sim_time_and_session_time_runs_on(tmp_path):
     columns = read_back(tmp_path / "reset.rrd")
     kinetic = columns["energy/kinetic"]
     h_ns = round(0.01 * 1e9)
-    assert kinetic["sim_time"] == ([k * h_ns for k in range(31)] + [k * h_ns for k in range(21)]
-                                   + [0])
-    assert kinetic["session_time"] == [k * h_ns for k in range(53)]
+    # Each run starts where the last ended (the reset shows as one instant with two rows).
+    assert kinetic["sim_time"] == ([k * h_ns for k in range(31)] + [k * h_ns for k in range(30, 51)]
+                                   + [50 * h_ns])
     assert np.max(np.abs(scalars(kinetic)[:, 0] - [s.kinetic for s in samples])) <= TOL
+    starts = [t for t, text in zip(columns["events"]["sim_time"], columns["events"]["TextLog:text"])
+              if "start" in text]
+    assert starts == [0, 30 * h_ns, 50 * h_ns]
+    trace = np.array(columns["arm/tip_trace"]["LineStrips2D:strips"])
+    assert np.allclose(trace[31][0], trace[31][1])   # the trace breaks at the reset
 
 
 def test_a_new_simulator_is_recorded_with_its_own_parameters(tmp_path):
@@ -279,8 +298,8 @@ def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
     sends = []
     original = telemetry.RerunRecorder._send
     monkeypatch.setattr(telemetry.RerunRecorder, "_send",
-                        lambda self, steps, *rest: (sends.append(len(steps)),
-                                                    original(self, steps, *rest)))
+                        lambda self, sim, rows, events: (sends.append(len(rows)),
+                                                         original(self, sim, rows, events)))
     samples, _ = record(scene, tmp_path / "batched.rrd")
     assert sends == [37] * 6 + [251 - 37 * 6]
     columns = read_back(tmp_path / "batched.rrd")
