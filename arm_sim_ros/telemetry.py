@@ -31,7 +31,7 @@ CHECK_EVERY = 256                # steps between looks at the wall clock
 FILE_PERIOD = 1.0                # wall seconds between sends to a file...
 LIVE_PERIOD = 0.1                # ...and to a viewer, which a person is watching
 FLUSH_TIMEOUT = 5.0              # wall seconds finish() waits for a sink before giving up on it
-QUEUED_BATCHES = 8               # batches waiting for the sender before flush() waits: bounds memory
+QUEUED_BATCHES = 8               # batches queued before flush() waits: bounds memory
 DEFAULT_PORT = 9876
 
 # Bright enough for the viewer's dark theme; one colour per readout wherever it appears.
@@ -211,7 +211,8 @@ class RerunRecorder:
     def flush(self, sim=None, force: bool = False) -> None:
         """Send the buffered steps when a send is due: a period of wall time has passed
         (LIVE_PERIOD for a viewer, FILE_PERIOD for a file) or BATCH_STEPS are waiting.
-        Cheap to call once per tick; step() also calls it every CHECK_EVERY steps."""
+        Cheap to call once per tick (`sim` is accepted for that protocol; the rows already
+        know theirs); step() also calls it every CHECK_EVERY steps."""
         waiting = len(self._rows)
         due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + CHECK_EVERY, BATCH_STEPS)
@@ -227,6 +228,10 @@ class RerunRecorder:
             self._sender = threading.Thread(target=self._send_batches, name="rerun-telemetry",
                                             daemon=True)
             self._sender.start()
+        if not self._sender.is_alive():   # never wait on a queue nobody empties
+            self._warn_once("send", "rerun: the telemetry sender stopped; running on without it")
+            self.enabled = False
+            return
         self._batches.put((self.sim, rows, events))
 
     def _on_sim_event(self, event) -> None:
@@ -255,7 +260,7 @@ class RerunRecorder:
 
     # -- sinks --------------------------------------------------------------------------
 
-    def open(self, sim) -> None:
+    def _open_sinks(self, sim) -> None:
         """Open the sinks asked for; each failure is a warning and that sink is skipped."""
         board = blueprint(sim.arm, sim.channels, self.live)
         sinks = []
@@ -307,7 +312,7 @@ class RerunRecorder:
         """Open the sinks (first time) and log what does not change from step to step."""
         layout = (sim.channels, sim.arm)
         if self._layout is None:
-            self.open(sim)
+            self._open_sinks(sim)
         elif layout != self._layout and self.enabled:
             rr.send_blueprint(blueprint(sim.arm, sim.channels, self.live), recording=self.stream)
         self._layout = layout

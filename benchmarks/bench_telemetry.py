@@ -180,7 +180,8 @@ def main() -> None:
           f"{'process CPU':>12s}")
     for name, _, wall, thread, process, _, _ in rows[1:]:
         print(f"{name:34s} {'':6s} {100 * (wall / base_wall - 1):9.1f}% "
-              f"{100 * (thread / base_thread - 1):10.1f}% {100 * (process / base_process - 1):11.1f}%")
+              f"{100 * (thread / base_thread - 1):10.1f}% "
+              f"{100 * (process / base_process - 1):11.1f}%")
 
     sim = Simulator(scene)
     states = []
