@@ -22,6 +22,8 @@ DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
 EXTRA_TYPES = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray")
 POLL_SECONDS = 0.1  # how soon a stop request is noticed
 TAKE_BATCH = 256
+QUIET_SECONDS = 0.1  # after a stop: no data for this long means everything sent has arrived
+FLUSH_SECONDS = 2.0  # ... and this bounds the wait when publishers keep going
 
 
 def parse_topic(text: str) -> tuple[str, str]:
@@ -69,25 +71,45 @@ class TopicRecorder:
             self._readers[name] = reader
 
     def poll(self, timeout: float = POLL_SECONDS) -> int:
-        """Wait up to `timeout` s for data, then write everything available; returns the count."""
+        """Wait up to `timeout` s for data, then write everything available; returns the
+        send time (ns) of the newest sample written, 0 if none."""
         self._waitset.wait(int(timeout * 1e9))
         return self.drain()
 
     def drain(self) -> int:
-        """Write every sample the readers hold; returns how many."""
+        """Write every sample the readers hold; returns the newest send time, as poll()."""
         from cyclonedds.internal import InvalidSample
 
-        written = 0
+        newest = 0
         for name, reader in self._readers.items():
             while taken := reader.take(N=TAKE_BATCH):
                 samples = [s for s in taken if not isinstance(s, InvalidSample)]
                 if samples and name not in self.writer:
                     self._add(name)
                 for sample in samples:
-                    self.writer.write(name, sample.sample_info.source_timestamp,
-                                      self._message(name, sample))
-                written += len(samples)
-        return written
+                    sent = sample.sample_info.source_timestamp
+                    self.writer.write(name, sent, self._message(name, sample))
+                    newest = max(newest, sent)
+        return newest
+
+    def run(self, stop, duration: float | None = None) -> None:
+        """Record until `stop.requested` or `duration` wall seconds, then flush."""
+        end = None if duration is None else time.monotonic() + duration
+        while not stop.requested and (end is None or time.monotonic() < end):
+            self.poll(POLL_SECONDS if end is None
+                      else min(POLL_SECONDS, max(0.0, end - time.monotonic())))
+        self.flush(time.time_ns())
+
+    def flush(self, stopped_ns: int) -> None:
+        """Write what was sent before the stop. DDS acknowledges a sample before its reader
+        can take it (it may sit in a delivery queue), so keep taking until a quiet interval,
+        a sample sent after the stop (in-order delivery: the rest has arrived), or
+        FLUSH_SECONDS."""
+        deadline = time.monotonic() + FLUSH_SECONDS
+        while time.monotonic() < deadline:
+            newest = self.poll(QUIET_SECONDS)
+            if newest == 0 or newest > stopped_ns:
+                return
 
     def _message(self, name, sample):
         from .bag import message_from
@@ -145,14 +167,8 @@ def record(path, topics: dict[str, str], participant, duration: float | None = N
     """Record until `stop.requested` or `duration` wall seconds; returns messages per topic."""
     from .bag import BagWriter
 
-    stop = stop or StopRequest()
-    end = None if duration is None else time.monotonic() + duration
     with BagWriter(path) as writer:
-        recorder = TopicRecorder(participant, topics, writer)
-        while not stop.requested and (end is None or time.monotonic() < end):
-            remaining = POLL_SECONDS if end is None else max(0.0, end - time.monotonic())
-            recorder.poll(min(POLL_SECONDS, remaining))
-        recorder.drain()
+        TopicRecorder(participant, topics, writer).run(stop or StopRequest(), duration)
         return dict(writer.counts)
 
 

@@ -184,14 +184,21 @@ def test_bag_writer_serialises_exactly_what_was_given(tmp_path):
 # --- arm-sim record on the dds transport ----------------------------------------------------
 
 wire = pytest.importorskip("arm_sim_ros.ros_messages")
+# Loopback only, and tagged with this process: a participant only discovers peers with the
+# same discovery tag, so a second run of this suite on the same domain ids cannot interfere.
+ISOLATED = wire.LOOPBACK_CONFIG.replace(
+    "<Discovery>", f"<Discovery><Tag>arm_sim_test_bag_{os.getpid()}</Tag>", 1)
 
 
 def writer_for(participant, topic, message_type, qos=None):
+    """A reliable writer that keeps every sample until acknowledged: a keep-last writer may
+    replace an unacknowledged sample in a burst, a loss the recorder could never see."""
     from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Policy, Qos
     from cyclonedds.topic import Topic
 
-    return DataWriter(participant, Topic(participant, wire.ros_topic(topic), message_type),
-                      qos=qos or wire.default_qos(message_type))
+    qos = (qos or wire.default_qos(message_type)) + Qos(Policy.History.KeepAll)
+    return DataWriter(participant, Topic(participant, wire.ros_topic(topic), message_type), qos=qos)
 
 
 def wait_matched(writers, readers=1, timeout=20.0):
@@ -208,6 +215,27 @@ def joint_states(count, offset=0.0):
                             effort=[float(k), 0.5]) for k in range(count)]
 
 
+def start_recording(path, topics, participant):
+    """Readers made on this thread (cyclonedds must not build a topic type on two threads at
+    once), the recording loop on another; returns a function that stops it like Ctrl-C
+    and returns the counts."""
+    from arm_sim_ros.record import StopRequest, TopicRecorder
+
+    writer = BagWriter(path)
+    recorder = TopicRecorder(participant, topics, writer)
+    stop = StopRequest()
+    thread = threading.Thread(target=recorder.run, args=(stop,))
+    thread.start()
+
+    def finish():
+        stop.requested = True
+        thread.join(10)
+        writer.close()
+        return dict(writer.counts)
+
+    return finish
+
+
 def assert_recorded(messages, topic, published):
     recorded = messages[topic]
     assert [raw for _, _, raw in recorded] == [m.serialize() for m in published]
@@ -216,16 +244,12 @@ def assert_recorded(messages, topic, published):
 
 def test_record_writes_exactly_what_a_participant_published(tmp_path):
     from cyclonedds.qos import Policy, Qos
-    from arm_sim_ros.record import StopRequest, record
 
     domain = 47
-    publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
-    recorder = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+    publisher = wire.make_participant(domain, ISOLATED)
+    recorder = wire.make_participant(domain, ISOLATED)
     topics = dict(NODE_TOPICS) | {"/target": "sensor_msgs/msg/JointState"}
-    stop, result = StopRequest(), {}
-    thread = threading.Thread(target=lambda: result.update(
-        record(tmp_path / "bag", topics, recorder, stop=stop)))
-    thread.start()
+    finish = start_recording(tmp_path / "bag", topics, recorder)
     try:
         target_qos = wire.default_qos(wire.JointState) + Qos(
             Policy.Durability.TransientLocal, Policy.Deadline(1_500_000_000))
@@ -253,8 +277,7 @@ def test_record_writes_exactly_what_a_participant_published(tmp_path):
         for w in writers.values():
             assert w.wait_for_acks(5_000_000_000)
     finally:
-        stop.requested = True
-        thread.join(10)
+        result = finish()
     assert result == {topic: len(m) for topic, m in published.items()}
     messages, connections = read_bag(tmp_path / "bag")
     assert set(messages) == set(published)
@@ -273,20 +296,16 @@ def test_record_writes_exactly_what_a_participant_published(tmp_path):
 
 
 def test_record_of_the_live_node_equals_the_core_with_the_same_commands(tmp_path):
-    from arm_sim_ros.record import StopRequest, record
     from arm_sim_ros.transports.dds import DdsArmSimNode
 
     domain = 50
-    recorder = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
-    stop, result = StopRequest(), {}
-    thread = threading.Thread(target=lambda: result.update(
-        record(tmp_path / "bag", dict(NODE_TOPICS), recorder, stop=stop)))
-    thread.start()
+    recorder = wire.make_participant(domain, ISOLATED)
+    finish = start_recording(tmp_path / "bag", dict(NODE_TOPICS), recorder)
     try:
         node = DdsArmSimNode({"scene": "release", "step_size": 0.001, "publish_rate": 100.0},
-                             domain_id=domain, config=wire.LOOPBACK_CONFIG,
+                             domain_id=domain, config=ISOLATED,
                              wall_clock=lambda: 100.0, start_stamp_ns=7_000_000_000)
-        peer = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+        peer = wire.make_participant(domain, ISOLATED)
         commands = writer_for(peer, "/joint_torque_commands", wire.Float64MultiArray)
         wait_matched([node.joint_state_writer, node.diagnostics_writer])
         wait_matched([commands], readers=2)  # the node and the recorder
@@ -300,8 +319,7 @@ def test_record_of_the_live_node_equals_the_core_with_the_same_commands(tmp_path
         for w in (node.joint_state_writer, node.diagnostics_writer, commands):
             assert w.wait_for_acks(5_000_000_000)
     finally:
-        stop.requested = True
-        thread.join(10)
+        result = finish()
     assert result == {"/joint_states": 15, "/joint_torque_commands": 2, "/diagnostics": 1}
     messages, _ = read_bag(tmp_path / "bag")
     sim = Simulator(load_scene("release").replace(policy="command", step_size=0.001))
@@ -328,12 +346,12 @@ RECORD_MAIN = "import sys; from arm_sim_ros.cli import main; sys.exit(main(sys.a
 def test_an_interrupted_recorder_leaves_a_readable_bag_with_everything_received(tmp_path, domain,
                                                                                 signum):
     env = os.environ | {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-                        "CYCLONEDDS_URI": wire.LOOPBACK_CONFIG, "ROS_STATIC_PEERS": ""}
+                        "CYCLONEDDS_URI": ISOLATED, "ROS_STATIC_PEERS": ""}
     path = tmp_path / "bag"
     process = subprocess.Popen([sys.executable, "-c", RECORD_MAIN, "record", str(path)], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
+        publisher = wire.make_participant(domain, ISOLATED)
         writer = writer_for(publisher, "/joint_states", wire.JointState)
         wait_matched([writer])
         sent = joint_states(600)  # more than one take() batch
