@@ -13,7 +13,7 @@ does not carry them) and infinite durations as {sec: 9223372036, nsec: 854775807
 """
 from __future__ import annotations
 
-from math import ceil
+from math import ceil, isfinite
 from pathlib import Path
 from time import perf_counter
 
@@ -181,7 +181,7 @@ class BagWriter:
 def steps_per_publish(step_size: float, publish_rate: float) -> int:
     """Integration steps between two publications, by the node's own rule: a rate whose
     period is not a whole number of steps is refused (stamps must stay simulated time)."""
-    if not (publish_rate > 0 and publish_rate != float("inf")):
+    if not (isfinite(publish_rate) and publish_rate > 0):
         raise BagError(f"--publish-rate {publish_rate} must be a positive number of Hz")
     try:
         return _steps_per_tick(publish_rate, step_size)
