@@ -12,8 +12,10 @@ without damping, no `work/actuator` or joint torques without an actuator.
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import socket
+import sys
 import threading
 import time
 from itertools import chain
@@ -26,21 +28,24 @@ import rerun.blueprint as rrb
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
+TRACE_SECONDS = 2.0              # the tip trace shows this much simulated time up to the cursor
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
-CHECK_EVERY = 256                # steps between looks at the wall clock
+CHECK_EVERY = 256                # steps between looks at the wall clock (file)...
+LIVE_CHECK_EVERY = 8             # ...and for a viewer: a node may take one step per tick
 FILE_PERIOD = 1.0                # wall seconds between sends to a file...
 LIVE_PERIOD = 0.1                # ...and to a viewer, which a person is watching
-FLUSH_TIMEOUT = 5.0              # wall seconds finish() waits for a sink before giving up on it
+FLUSH_TIMEOUT = 2.0              # wall seconds finish() waits for a sink before giving up on it
 QUEUED_BATCHES = 8               # batches queued before flush() waits: bounds memory
 DEFAULT_PORT = 9876
 
 # Bright enough for the viewer's dark theme; one colour per readout wherever it appears.
+# Names use only glyphs the viewer's font has (a missing one, e.g. ᵀ, crashes the viewer).
 ENERGY_SERIES = {
     "energy/kinetic": ("kinetic T", (255, 170, 60)),
     "energy/potential": ("potential V", (90, 180, 255)),
     "energy/total": ("total E = T + V", (245, 245, 245)),
     "energy/dissipated": ("dissipated ∫d|q̇|²dt", (255, 95, 125)),
-    "work/actuator": ("actuator work ∫τᵀq̇dt", (110, 230, 110)),
+    "work/actuator": ("actuator work ∫τ·q̇dt", (110, 230, 110)),
     "energy/balance_residual": ("residual E−E₀−W+dissipated", (225, 120, 255)),
 }
 JOINT_SERIES = {
@@ -107,7 +112,7 @@ def blueprint(arm, channels, live: bool) -> rrb.Blueprint:
     balance = [p for p in ("work/actuator", "energy/dissipated", "energy/balance_residual")
                if p in energy_paths(channels)]
     trace_range = rrb.VisibleTimeRanges(
-        timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
+        timeline=TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRACE_SECONDS),
         end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
     arm_view = rrb.Spatial2DView(
         name="Arm (y up, V = 0 on the grey line)", origin="arm",
@@ -168,14 +173,13 @@ class RerunRecorder:
         self.live = bool(spawn or connect)
         self._warn = warn or logging.getLogger(__name__).warning
         self._warned = set()
-        # Batches arrive whole; rerun's own batcher would only split and re-merge them.
-        self.stream = rr.RecordingStream(application_id,
-                                         batcher_config=rr.ChunkBatcherConfig.NEVER())
+        self.stream = rr.RecordingStream(application_id)
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
         self._rows, self._events = [], []   # (steps, state[, command]) per step; text lines
-        self._check_at = CHECK_EVERY
+        self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
+        self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
         self._last_raw = -np.inf  # steps x h of the last row sent
@@ -212,15 +216,15 @@ class RerunRecorder:
         """Send the buffered steps when a send is due: a period of wall time has passed
         (LIVE_PERIOD for a viewer, FILE_PERIOD for a file) or BATCH_STEPS are waiting.
         Cheap to call once per tick (`sim` is accepted for that protocol; the rows already
-        know theirs); step() also calls it every CHECK_EVERY steps."""
+        know theirs); step() also calls it every CHECK_EVERY (LIVE_CHECK_EVERY) steps."""
         waiting = len(self._rows)
         due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
-        self._check_at = min(waiting + CHECK_EVERY, BATCH_STEPS)
+        self._check_at = min(waiting + self._check_every, BATCH_STEPS)
         if not (waiting or self._events) or not due:
             return
         rows, events = self._rows, self._events
         self._rows, self._events = [], []
-        self._check_at = min(CHECK_EVERY, BATCH_STEPS)
+        self._check_at = min(self._check_every, BATCH_STEPS)
         self._last_send = time.monotonic()
         if not self.enabled:
             return
@@ -273,12 +277,7 @@ class RerunRecorder:
                 self._warn_once("file", f"rerun: cannot write {self.path} ({error.strerror}); "
                                         "the simulation runs on without that recording")
         if self.spawn:
-            try:
-                rr.spawn(port=DEFAULT_PORT, connect=False, recording=self.stream)
-                sinks.append(rr.GrpcSink(viewer_url(str(DEFAULT_PORT))))
-                self.sinks.append("spawned viewer")
-            except Exception as error:
-                self._warn_once("spawn", f"rerun: cannot spawn a viewer ({error}); running on")
+            self._spawn_viewer(sinks)
         if self.connect:
             url = viewer_url(self.connect)
             if viewer_reachable(url):
@@ -291,6 +290,26 @@ class RerunRecorder:
             rr.set_sinks(*sinks, default_blueprint=board, recording=self.stream)
             self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
             self.enabled = True
+
+    def _spawn_viewer(self, sinks) -> None:
+        """A viewer on DEFAULT_PORT; rerun only logs when one fails to come up, so check."""
+        url = viewer_url(str(DEFAULT_PORT))
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                     or os.environ.get("WAYLAND_DISPLAY")):
+            self._warn_once("spawn", "rerun: no display to spawn a viewer on (DISPLAY is unset); "
+                                     "running on without it")
+            return
+        try:
+            rr.spawn(port=DEFAULT_PORT, connect=False, recording=self.stream)
+        except Exception as error:
+            self._warn_once("spawn", f"rerun: cannot spawn a viewer ({error}); running on")
+            return
+        if not viewer_reachable(url):
+            self._warn_once("spawn", "rerun: the spawned viewer did not come up; running on "
+                                     "without it")
+            return
+        sinks.append(rr.GrpcSink(url))
+        self.sinks.append("spawned viewer")
 
     def _bind(self, sim) -> None:
         """Rows buffered so far belong to the previous simulator: send them first. The

@@ -6,6 +6,7 @@ Simulator run of the same scene: channel set, time column, values to 1e-12.
 import math
 import socket
 import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -192,6 +193,15 @@ def test_series_are_named_and_coloured(tmp_path):
             assert max((rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255) >= 128
 
 
+def test_series_names_use_only_glyphs_the_viewer_can_draw():
+    """The viewer's font lacks e.g. ᵀ, and a missing glyph crashes it (seen in 0.41)."""
+    drawn = set("∫τ·²₀−") | {"\u0307"}      # each seen rendered in a headless screenshot
+    names = [name for name, _ in telemetry.ENERGY_SERIES.values()]
+    names += [n for title, series in telemetry.JOINT_SERIES.values() for n in (title, *series)]
+    for name in names:
+        assert set(name) <= drawn | {chr(c) for c in range(32, 127)}, name
+
+
 def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
     scene = load_scene("release").replace(step_size=0.001, duration=0.1,
                                           link_lengths=(0.8, 1.2), com_distances=(0.4, 0.5))
@@ -334,6 +344,21 @@ def test_a_missing_viewer_is_one_warning_and_the_run_goes_on(tmp_path):
     assert len(warnings) == 1 and f"127.0.0.1:{port}" in warnings[0]
     assert recorder.sinks == [f"file {tmp_path / 'alongside.rrd'}"]
     assert_equals_core(read_back(tmp_path / "alongside.rrd"), samples)   # the file still works
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the display check is Linux's")
+def test_spawning_without_a_display_is_one_warning(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    warnings = []
+    scene = load_scene("release")
+    sim = Simulator(scene)
+    recorder = telemetry.make_recorder(scene, spawn=True, warn=warnings.append)
+    recorder.start(sim)
+    sim.run(scene.duration, recorder.step)
+    recorder.finish(sim)
+    assert len(warnings) == 1 and "no display" in warnings[0]
+    assert recorder.sinks == [] and sim.steps == 50
 
 
 def test_viewer_addresses():
