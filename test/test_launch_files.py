@@ -35,10 +35,12 @@ def test_params_file_is_accepted_by_the_node(parameters):
 
 
 def test_params_file_values(parameters):
+    # No scene here: a node section in a params file wins over `-p scene:=...` (as in rclcpp).
+    assert "scene" not in parameters
     assert parameters["step_size"] == 0.001
     assert parameters["publish_rate"] == 100.0
     assert parameters["command_timeout"] == 0.5
-    assert parameters["torque_limit"] == 100.0
+    assert parameters["torque_limit"] == SPECS["torque_limit"].default   # launched = unlaunched
     assert parameters["joint_names"] == ["shoulder_joint", "elbow_joint"]
     assert parameters["rerun_path"] == ""
 
