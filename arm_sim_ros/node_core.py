@@ -78,6 +78,8 @@ PARAMETERS = (
     _scene_spec("com_distances", "float_pair", "[r1, r2] m, joint to centre of mass"),
     _scene_spec("com_inertias", "float_pair", "[I1, I2] kg m^2 about each centre of mass"),
     _scene_spec("integrator", "str", "Runge-Kutta method (rk4 default)"),
+    _scene_spec("rtol", "float", "relative error tolerance of integrator dopri5"),
+    _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),

@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 
 from .dynamics import POLICIES
-from .integrators import INTEGRATORS
+from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
 
@@ -37,6 +37,8 @@ class Scene:
     policy: str = "zero"
     constant_torque: tuple[float, float] = (0.0, 0.0)
     integrator: str = "rk4"
+    rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
+    atol: float = DEFAULT_ATOL
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -52,6 +54,10 @@ class Scene:
         if self.integrator not in INTEGRATORS:
             raise SceneError(f"integrator {self.integrator!r} is unknown; choose one of "
                              f"{', '.join(INTEGRATORS)}")
+        for name in ("rtol", "atol"):
+            if not getattr(self, name) >= 1e-14:
+                raise SceneError(f"{name} = {getattr(self, name)} must be at least 1e-14 "
+                                 "(tighter than rounding cannot be met)")
         if not self.step_size > 0:
             raise SceneError(f"step_size = {self.step_size} must be positive")
         if not self.duration >= 0:

@@ -69,7 +69,7 @@ class Simulator:
         self.channels = self.dynamics.channels
         self._rhs = self.dynamics.function
         tableau = INTEGRATORS[scene.integrator]
-        self._step = compile_step(tableau, len(self.channels))
+        self._step = compile_step(tableau, len(self.channels), rtol=scene.rtol, atol=scene.atol)
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
         self._work_index = 4 + self.channels.index("work") if "work" in self.channels else None

@@ -130,3 +130,18 @@ def test_simulated_time_is_steps_times_step_size():
     for _ in range(1000):
         sim.step()
     assert sim.time == 1000 * 0.001
+
+
+def test_scene_tolerances_reach_the_embedded_pair():
+    # One 0.5 s publish step, so the tolerances alone decide the internal sub-steps.
+    def run(rtol, atol):
+        sim = Simulator(load_scene("release").replace(integrator="dopri5", step_size=0.5,
+                                                      rtol=rtol, atol=atol))
+        sim.run(0.5)
+        return sim.state
+
+    reference = run(1e-13, 1e-14)
+    error = {tol: max(abs(a - b) for a, b in zip(run(tol, tol), reference)) for tol in (1e-4, 1e-9)}
+    assert error[1e-9] < error[1e-4] / 1000
+    with pytest.raises(Exception, match="rtol = 0.0 must be at least 1e-14"):
+        load_scene("release").replace(rtol=0.0)
