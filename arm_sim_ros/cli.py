@@ -109,6 +109,8 @@ def cmd_run(args) -> int:
         for recorder in recorders:
             recorder.finish(sim)
     result = sim.sample().as_dict() | {"max_abs_energy_drift": drift}
+    for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
+        print(f"arm-sim: {event.kind} at t = {event.t:g} s: {event.message}", file=sys.stderr)
     if args.json:
         print(json.dumps(result))
     else:

@@ -151,14 +151,18 @@ class Simulator:
         for listener in self.event_listeners:
             listener(event)
 
-    def energy(self, state) -> float:
-        """Total energy; NaN where it cannot be evaluated (angles near 1e308 make sin fail)."""
+    def energies(self, state) -> tuple[float, float]:
+        """(kinetic, potential); NaN where they cannot be evaluated (angles near 1e308
+        make sin fail), so a held absurd state is reported rather than crashing."""
         q, qd = state[0:2], state[2:4]
         try:
-            return (model.kinetic_energy(self.arm, q, qd)
-                    + model.potential_energy(self.arm, q, self.scene.gravity))
+            return (model.kinetic_energy(self.arm, q, qd),
+                    model.potential_energy(self.arm, q, self.scene.gravity))
         except ValueError:
-            return float("nan")
+            return float("nan"), float("nan")
+
+    def energy(self, state) -> float:
+        return sum(self.energies(state))
 
     def residual(self) -> float:
         y = self.state
@@ -169,10 +173,10 @@ class Simulator:
     def sample(self) -> Sample:
         y = self.state
         q, qd = (y[0], y[1]), (y[2], y[3])
+        kinetic, potential = self.energies(y)
         return Sample(
             t=self.time, q=q, qd=qd, tau=tuple(self.dynamics.applied_torque(q)),
-            kinetic=model.kinetic_energy(self.arm, q, qd),
-            potential=model.potential_energy(self.arm, q, self.scene.gravity),
+            kinetic=kinetic, potential=potential,
             work=y[self._work_index] if self._work_index is not None else 0.0,
             dissipated=y[self._dissipated_index] if self._dissipated_index is not None else 0.0,
             initial_energy=self.initial_energy)

@@ -270,3 +270,13 @@ def test_damped_release_is_passive_over_the_whole_range(damping, h):
     drift = np.maximum.accumulate(np.maximum(free - free[0], 0.0))
     e = energies(scene, out)
     assert (e - e[0] - drift).max() <= 1e-6
+
+
+def test_arm_sim_run_says_when_it_sub_stepped_or_held(capsys):
+    from arm_sim_ros.cli import main
+
+    assert main(["run", "--scene", "damped_release", "--set", "damping=1e4", "--duration", "0.1"]) == 0
+    assert "arm-sim: substepping at t = 0 s" in capsys.readouterr().err
+    assert main(["run", "--set", "initial_positions=1e308,1e308", "--duration", "0.02"]) == 0
+    err = capsys.readouterr().err
+    assert "arm-sim: fault" in err and "holding the last finite state" in err
