@@ -487,7 +487,8 @@ class ArmSimCore:
         return (self.sim.time - self._diag_time) / wall if wall > 0 else 0.0
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
-        """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks.
+        """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
+        sub-steps and refused steps.
         Rates are over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf = self.real_time_factor(wall_now)
@@ -512,6 +513,10 @@ class ArmSimCore:
             ("command_timeouts", str(self.command_timeouts)),
             ("command", f"{self.command[0]:g} {self.command[1]:g}"),
             ("steps_per_tick", str(self.config.steps_per_tick)),
+            # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.
+            ("substeps_per_step", str(self.sim.substeps)),
+            ("substeps_taken", str(self.sim.substeps_taken)),
+            ("refused_steps", str(self.sim.refused_steps)),
         ]
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)

@@ -18,6 +18,9 @@ from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
 
+MAX_INITIAL_ANGLE = 1e6   # rad
+
+
 class SceneError(ValueError):
     """A scene or override that cannot be simulated; the message says what and why."""
 
@@ -45,6 +48,10 @@ class Scene:
     def __post_init__(self):
         for f in fields(self):
             object.__setattr__(self, f.name, _coerce(f.name, FIELD_KINDS[f.name], getattr(self, f.name)))
+        # Beyond this sin/cos keep no digit of an angle; nothing physical starts there.
+        if max(abs(v) for v in self.initial_positions) > MAX_INITIAL_ANGLE:
+            raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
+                             f"{MAX_INITIAL_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if self.damping < 0:

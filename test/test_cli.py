@@ -91,6 +91,7 @@ def test_csv_has_initial_row_plus_one_per_step(capsys, tmp_path):
     (["run", "--set", "com_inertias=-1,0.1"], "com_inertias[0] = -1.0 is impossible"),
     (["run", "--set", "policy=teleport"], "policy 'teleport' is unknown"),
     (["run", "--set", "damping=-1"], "would add energy"),
+    (["run", "--set", "initial_positions=1e300,0"], "initial_positions = [1e+300, 0.0] is beyond 1e+06 rad"),
     (["run", "--csv", "/nonexistent-dir/x.csv"], "cannot write --csv"),
     (["frobnicate"], "invalid choice"),
 ])

@@ -134,3 +134,15 @@ def test_fuzzed_parameters_are_refused_with_nothing_changed_or_run_finite(change
     diagnostics = core.diagnostics()
     assert diagnostics.level in (node_core.OK, node_core.WARN, node_core.ERROR)
     assert (diagnostics.level == node_core.ERROR) == core.held
+
+
+def test_diagnostics_report_substeps_for_stiff_damping():
+    # d h Lambda = 200 x 0.01 x 15.09 is past RK4's limit 2.785: the guard sub-steps and says so.
+    core = node_core.ArmSimCore(node_core.resolve_parameters({"damping": 200.0, "step_size": 0.01}),
+                                logging.getLogger("stiff"), FakeClock())
+    for _ in range(3):
+        assert all_finite(core.tick())
+    values = dict(core.diagnostics().values)
+    assert int(values["substeps_per_step"]) == core.sim.substeps > 1
+    assert int(values["substeps_taken"]) == 3 * core.sim.substeps
+    assert values["refused_steps"] == "0"

@@ -277,6 +277,6 @@ def test_arm_sim_run_says_when_it_sub_stepped_or_held(capsys):
 
     assert main(["run", "--scene", "damped_release", "--set", "damping=1e4", "--duration", "0.1"]) == 0
     assert "arm-sim: substepping at t = 0 s" in capsys.readouterr().err
-    assert main(["run", "--set", "initial_positions=1e308,1e308", "--duration", "0.02"]) == 0
+    assert main(["run", "--set", "initial_velocities=1e200,1e200", "--duration", "0.02"]) == 0
     err = capsys.readouterr().err
     assert "arm-sim: fault" in err and "holding the last finite state" in err
