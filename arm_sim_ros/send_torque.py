@@ -67,7 +67,7 @@ class TorquePublisher:
 
     def wait_for_subscriber(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
-        while not self.writer.get_matched_subscriptions():
+        while not self._msg.matched(self.writer):
             if time.monotonic() > deadline:
                 return False
             time.sleep(0.02)

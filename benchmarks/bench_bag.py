@@ -68,7 +68,7 @@ def record_throughput(messages: int, domain: int) -> tuple[float, int]:
         thread = threading.Thread(target=lambda: counts.update(
             record(Path(tmp) / "bag", dict(DEFAULT_TOPICS), listener, stop=stop)))
         thread.start()
-        while not writer.get_matched_subscriptions():
+        while not wire.matched(writer):
             time.sleep(0.01)
         sample = wire.JointState(name=["shoulder_joint", "elbow_joint"], position=[0.1, 0.2],
                                  velocity=[0.3, 0.4], effort=[0.5, 0.6])

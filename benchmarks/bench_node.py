@@ -73,7 +73,7 @@ def other_process_reader():
 
 def wait_matched(node, count):
     deadline = time.monotonic() + 10
-    while len(node.joint_state_writer.get_matched_subscriptions()) < count:
+    while msg.matched(node.joint_state_writer) < count:
         if time.monotonic() > deadline:
             raise SystemExit("the subscriber was not discovered on loopback")
         time.sleep(0.01)

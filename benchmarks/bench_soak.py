@@ -74,7 +74,7 @@ def node_soak(seconds: float) -> None:
                         qos=msg.default_qos(msg.Float64MultiArray))
     reader = DataReader(peer, Topic(peer, "rt/joint_states", msg.JointState),
                         qos=msg.default_qos(msg.JointState))
-    while not writer.get_matched_subscriptions():
+    while not msg.matched(writer):
         time.sleep(0.01)
     rng, hostile = random.Random(6), ([math.nan, 0.0], [math.inf, 1.0], [1.0], [], [1e308, 0.0])
     sent_bad = received = non_finite = 0

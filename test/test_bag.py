@@ -203,7 +203,7 @@ def writer_for(participant, topic, message_type, qos=None):
 
 def wait_matched(writers, readers=1, timeout=20.0):
     deadline = time.monotonic() + timeout
-    while not all(len(w.get_matched_subscriptions()) >= readers for w in writers):
+    while not all(wire.matched(w) >= readers for w in writers):
         assert time.monotonic() < deadline, "the recorder never subscribed"
         time.sleep(0.01)
 

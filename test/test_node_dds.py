@@ -53,8 +53,7 @@ class Peer:
 
     def wait_matched(self):
         deadline = time.monotonic() + TIMEOUT
-        while not (self.commands.get_matched_subscriptions()
-                   and self.joint_states.get_matched_publications()):
+        while not (msg.matched(self.commands) and msg.matched(self.joint_states)):
             assert time.monotonic() < deadline, "node not discovered on loopback"
             time.sleep(0.001)
 
