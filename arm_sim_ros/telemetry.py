@@ -1,10 +1,13 @@
 """Rerun telemetry: the explainer's readouts on simulated time, beside a drawing of the arm.
 
 The only module that imports rerun. Recording must never slow or stop the physics:
-step() only appends the state tuple; a batch of steps goes to a sender thread, which
-computes energies, torques and drawings with numpy and sends one send_columns per
-entity (rerun releases the GIL while it encodes). A sink that fails (unwritable file,
-no viewer at the address, a viewer that dies) is one warning; the simulation runs on.
+step_batch() takes a tick's states in one call (step() one step's) and appends them to
+one array of doubles; a batch of steps goes to a sender thread, which computes energies,
+torques and drawings with numpy and sends one send_columns per entity (rerun encodes the
+chunks on threads of its own). What is left on the simulation's side is the copy of the
+states and the sender's time holding the GIL; benchmarks/bench_telemetry.py measures both.
+A sink that fails (unwritable file, no viewer at the address, a viewer that dies) is one
+warning; the simulation runs on.
 
 Channels follow the scene's effects (Simulator.channels): no `energy/dissipated`
 without damping, no `work/actuator` or joint torques without an actuator.
@@ -18,6 +21,7 @@ import socket
 import sys
 import threading
 import time
+from array import array
 from itertools import chain
 from urllib.parse import urlsplit
 
@@ -159,7 +163,8 @@ def viewer_reachable(url: str, timeout: float = 0.5) -> bool:
 
 
 class RerunRecorder:
-    """A recorder for cli.RUN_RECORDERS and the node: start / step / flush / event / finish.
+    """A recorder for cli.RUN_RECORDERS and the node: start / step or step_batch / flush /
+    event / finish.
 
     start(sim) may be called again after a reset or for a new Simulator (step() also
     notices a new one). Simulated time going back (a reset) continues the timeline from
@@ -177,7 +182,12 @@ class RerunRecorder:
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
-        self._rows, self._events = [], []   # (steps, state[, command]) per step; text lines
+        # Steps waiting to be sent: their states flattened into one array of doubles (40
+        # bytes a step rather than ~200 as tuples kept alive, and nothing left to convert
+        # while holding the GIL in the sender), and runs of consecutive steps under one held
+        # command: [first step, command (None without a command policy), steps].
+        self._states, self._runs, self._events = array("d"), [], []   # ...and text lines
+        self._waiting = 0                       # steps in self._runs
         self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
         self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
@@ -201,29 +211,43 @@ class RerunRecorder:
         self.step(sim)
 
     def step(self, sim) -> None:
-        """After every physics step: keep the state, nothing else (see flush)."""
+        """After a physics step: keep its state (see step_batch)."""
+        self.step_batch(sim, (sim.state,))
+
+    def step_batch(self, sim, states) -> None:
+        """After len(states) physics steps: their states in order, the last being sim.state,
+        taken under the command sim holds now (commands change between ticks, not within).
+        The node calls this once per tick; the states are copied, so the caller may reuse
+        the list. Nothing else happens here (see flush)."""
         if sim is not self.sim:
             self._bind(sim)
-        rows = self._rows
-        if self._commanded:
-            rows.append((sim.steps, sim.state, tuple(sim.dynamics.command)))
+        n = len(states)
+        if n == 0:
+            return
+        first = sim.steps - n + 1
+        command = tuple(sim.dynamics.command) if self._commanded else None
+        runs = self._runs
+        if runs and runs[-1][0] + runs[-1][2] == first and runs[-1][1] == command:
+            runs[-1][2] += n                  # the run goes on: same command, next step
         else:
-            rows.append((sim.steps, sim.state))
-        if len(rows) >= self._check_at:
+            runs.append([first, command, n])
+        self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
+        self._waiting += n
+        if self._waiting >= self._check_at:
             self.flush()
 
     def flush(self, sim=None, force: bool = False) -> None:
         """Send the buffered steps when a send is due: a period of wall time has passed
         (LIVE_PERIOD for a viewer, FILE_PERIOD for a file) or BATCH_STEPS are waiting.
         Cheap to call once per tick (`sim` is accepted for that protocol; the rows already
-        know theirs); step() also calls it every CHECK_EVERY (LIVE_CHECK_EVERY) steps."""
-        waiting = len(self._rows)
+        know theirs); step_batch() also calls it every CHECK_EVERY (LIVE_CHECK_EVERY) steps."""
+        waiting = self._waiting
         due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + self._check_every, BATCH_STEPS)
         if not (waiting or self._events) or not due:
             return
-        rows, events = self._rows, self._events
-        self._rows, self._events = [], []
+        batch = (self.sim, self._runs, self._states, self._events)
+        self._states, self._runs, self._events, self._waiting = array("d"), [], [], 0
         self._check_at = min(self._check_every, BATCH_STEPS)
         self._last_send = time.monotonic()
         if not self.enabled:
@@ -236,7 +260,7 @@ class RerunRecorder:
             self._warn_once("send", "rerun: the telemetry sender stopped; running on without it")
             self.enabled = False
             return
-        self._batches.put((self.sim, rows, events))
+        self._batches.put(batch)
 
     def _on_sim_event(self, event) -> None:
         self.event(f"{event.kind}: {event.message}",
@@ -245,7 +269,7 @@ class RerunRecorder:
     def event(self, text: str, level: str = "info") -> None:
         """A text-log line, sent with the steps: at the next step recorded (the last one if
         none follows before a send)."""
-        self._events.append((len(self._rows), str(text),
+        self._events.append((self._waiting, str(text),
                              LEVELS.get(str(level).lower(), rr.TextLogLevel.INFO)))
 
     def finish(self, sim=None) -> None:
@@ -363,13 +387,11 @@ class RerunRecorder:
                 with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
                     self._guard(self._send, *batch)
 
-    def _send(self, sim, rows, events) -> None:
-        if rows:
-            steps, states, *commands = zip(*rows)
-            self._send_rows(sim, np.fromiter(steps, np.int64, len(steps)), _array(states),
-                            _array(commands[0]) if commands else None)
+    def _send(self, sim, runs, states, events) -> None:
+        n = sum(steps for _, _, steps in runs)
+        if n:
+            self._send_rows(sim, *_unpack(runs, states, n))
         if events:
-            n = len(rows)
             at = [self._row_ns[min(i, n - 1)] if n else self._last_ns for i, _, _ in events]
             self._send_columns("events", [_time_column(np.array(at))], rr.TextLog.columns(
                 text=[text for _, text, _ in events], level=[level for _, _, level in events]))
@@ -391,7 +413,7 @@ class RerunRecorder:
             values["work/actuator"] = work
             values["joints/torque"] = _torques(sim, q1, q2, commands)
         for path, column in values.items():
-            self._send_columns(path, index, rr.Scalars.columns(scalars=column))
+            self._send_columns(path, index, _scalars(column))
         self._send_drawing(sim, steps, q1, q2)
 
     def _timeline(self, t):
@@ -413,11 +435,9 @@ class RerunRecorder:
         index = [_time_column(self._row_ns[frames])]
         elbow, tip = drawing_points(sim.arm, q1[frames], q2[frames])
         base = np.zeros_like(elbow)
-        n = len(frames)
         self._send_columns("arm/links", index, _strips(
             np.stack((base, elbow, elbow, tip), 1), strips_per_row=2))
-        self._send_columns("arm/joints", index, rr.Points2D.columns(
-            positions=np.stack((base, elbow, tip), 1).reshape(-1, 2)).partition(np.full(n, 3)))
+        self._send_columns("arm/joints", index, _points(np.stack((base, elbow, tip), 1)))
         # The trace joins consecutive frames, but not across a reset.
         previous = np.concatenate(([self._last_tip if self._last_tip is not None else tip[0]],
                                    tip[:-1]))
@@ -460,28 +480,62 @@ def _torques(sim, q1, q2, commands):
     return tau
 
 
-def _array(tuples):
-    """A list of equal-length tuples as a 2D array (twice as fast as np.array for this)."""
-    width = len(tuples[0])
-    return np.fromiter(chain.from_iterable(tuples), float, len(tuples) * width).reshape(-1, width)
+def _unpack(runs, states, n):
+    """Runs of [first step, command, steps] (n steps in all) and their flattened states as
+    arrays: step numbers (n,), states (n, width), commands (n, 2) or None."""
+    states = np.frombuffer(states, float).reshape(n, -1)
+    lengths = np.array([count for _, _, count in runs])
+    firsts = np.array([first for first, _, _ in runs]) - (np.cumsum(lengths) - lengths)
+    steps = np.arange(n) + np.repeat(firsts, lengths)
+    commands = (np.repeat(np.array([c for _, c, _ in runs], float), lengths, axis=0)
+                if runs[0][1] is not None else None)
+    return steps, states, commands
 
 
 def _time_column(ns):
     return rr.TimeColumn(TIMELINE, duration=ns)
 
 
+# Columns are built as Arrow directly: rerun's Archetype.columns() converts through Python
+# (strip by strip for line strips) and costs 3-10x as much; this runs in the sender thread,
+# where every microsecond holding the GIL is one the simulation waits for.
+
+def _column(descriptor, batch, items: int, per_row: int):
+    """`items` components of `batch`, `per_row` of them in each row."""
+    offsets = np.arange(0, items + 1, per_row, dtype=np.int32)
+    return [rr.ComponentColumn(descriptor, batch, offsets=offsets)]
+
+
+def _scalars(values):
+    """A Scalars column: one row per entry of (n,) values, or per row of (n, k)."""
+    flat = np.ascontiguousarray(values, dtype=float).reshape(-1)
+    return _column(rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch(pa.array(flat)),
+                   flat.size, flat.size // len(values))
+
+
+def _vertices(points, kind):
+    """(..., 2) points as Arrow float32 pairs of `kind`."""
+    flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))
+    return pa.FixedSizeListArray.from_arrays(flat, type=kind)
+
+
+def _points(points):
+    """(rows, k, 2) points as a Points2D positions column of k points per row."""
+    kind = rr.components.Position2DBatch._ARROW_DATATYPE
+    rows, k = points.shape[:2]
+    return _column(rr.Points2D.descriptor_positions(),
+                   rr.components.Position2DBatch(_vertices(points, kind)), rows * k, k)
+
+
 def _strips(points, strips_per_row=1):
     """Two-point line strips, (rows, 2 x strips_per_row, 2) points, as one LineStrips2D
-    column; built as Arrow directly, since rerun converts strip by strip in Python."""
+    column."""
     kind = rr.components.LineStrip2DBatch._ARROW_DATATYPE
-    flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))
-    vertices = pa.FixedSizeListArray.from_arrays(flat, type=kind.value_type)
     count = points.shape[0] * strips_per_row
     strips = pa.ListArray.from_arrays(pa.array(np.arange(0, 2 * count + 1, 2, dtype=np.int32)),
-                                      vertices, type=kind)
-    column = rr.ComponentColumn(rr.LineStrips2D.descriptor_strips(),
-                                rr.components.LineStrip2DBatch(strips))
-    return [column.partition(np.full(points.shape[0], strips_per_row))]
+                                      _vertices(points, kind.value_type), type=kind)
+    return _column(rr.LineStrips2D.descriptor_strips(), rr.components.LineStrip2DBatch(strips),
+                   count, strips_per_row)
 
 
 def _nanoseconds(seconds):

@@ -1,26 +1,32 @@
-"""Rerun logging overhead per simulated step at 1 kHz (h = 1 ms), file sink, in one run:
+"""Rerun logging overhead per simulated step at 1 kHz (h = 1 ms), file sink, on the paths
+the node and `arm-sim run --rerun` take, each side by side with the same loop bare:
 
-- bare: Simulator.step() alone, the bar;
-- batched: step() + RerunRecorder.step(), i.e. the state tuple appended; batches go to
-  the sender thread (numpy for energies/torques/drawing, one send_columns per entity);
-- per-sample: step() + one rr.log per channel per step, energies from model's scalar
+- node: ArmSimCore.tick() (no transport) at 100 Hz (10 steps per tick) and 1 kHz (1 step
+  per tick); with telemetry each tick hands its states to RerunRecorder.step_batch();
+- arm-sim run: cli.run_recorded() (Simulator.run, which also tracks the largest residual),
+  bare and with the recorder the --rerun flag builds (step_batch every 1000 steps);
+- per-step step(): Simulator.step() + RerunRecorder.step(sim) after each, the protocol a
+  recorder without step_batch gets (against bare Simulator.step());
+- per-sample rr.log: one rr.log per channel per step, energies from model's scalar
   functions, the drawing at the same 200 frames/s: what a straightforward sink costs.
 
-Columns: wall µs/step of the stepping loop (what the simulation feels), CPU µs/step of
-the simulation thread, marginal CPU µs/step of the whole process including the sender
-thread and rerun's encoder (runs of N and 2N steps; what the machine pays), and the
-per-recording start + finish wall time.
-A second table times the energy readouts alone: model's scalar functions per step vs
-the vectorised helper per row of a batch (why telemetry.energies exists).
+Columns: wall µs/step of the stepping loop (what the simulation feels), with its spread over
+the rounds; CPU µs/step of the simulation thread; marginal CPU µs/step of the whole process
+including the sender thread and rerun's encoder threads (runs of N and 2N steps, so the fixed
+start/finish cost, shown apart, drops out; what the machine pays); bytes written per step.
+The modes run round-robin, --repeat rounds, so each overhead is also taken within a round
+(same machine load on both sides): median and range over the rounds.
+A second table times the energy readouts alone: model's scalar functions per step vs the
+vectorised helper per row of a batch (why telemetry.energies exists).
 
-    python benchmarks/bench_telemetry.py [--scene damped_release] [--seconds 30] [--repeat 5]
+    python benchmarks/bench_telemetry.py [--scene damped_release] [--seconds 30] [--repeat 7]
 
-Each figure is the best of --repeat runs, clock by clock: the machine is shared, the
-minimum is the least disturbed. Files go to a temporary directory and are removed.
+Files go to a temporary directory and are removed.
 """
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -28,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from arm_sim_ros import model, telemetry
+from arm_sim_ros import cli, model, node_core, telemetry
 from arm_sim_ros.scene import load_scene
 from arm_sim_ros.simulator import Simulator
 
@@ -39,45 +45,81 @@ class Clocks:
     """Wall and CPU clocks around the stepping loop, and around the whole recording."""
 
     def __enter__(self):
-        self.wall, self.thread, self.process = (time.perf_counter(), time.thread_time(),
-                                                time.process_time())
-        self.outer = self.wall
+        self.process, self.outer = time.process_time(), time.perf_counter()
+        self.loop_started()
         return self
+
+    def loop_started(self):
+        self.wall, self.thread = time.perf_counter(), time.thread_time()
 
     def loop_done(self):
         self.loop_wall = time.perf_counter() - self.wall
         self.loop_thread = time.thread_time() - self.thread
+        self.finish_started = time.perf_counter()
 
     def __exit__(self, *exc):
         self.total_process = time.process_time() - self.process
-        self.total_wall = time.perf_counter() - self.outer
+        # start-up (before the loop) + finish (after it)
+        self.fixed = (self.wall - self.outer) + (time.perf_counter() - self.finish_started)
 
 
-def bare(scene, steps, _path):
+def step_loop(scene, steps, path, recorded):
+    """Simulator.step() in a loop, with RerunRecorder.step(sim) after each if `recorded`."""
     sim = Simulator(scene)
     advance = sim.step
     with Clocks() as clocks:
-        for _ in range(steps):
-            advance()
-        clocks.loop_done()
-    clocks.fixed = 0.0
-    return clocks
-
-
-def batched(scene, steps, path):
-    sim = Simulator(scene)
-    with Clocks() as clocks:
-        recorder = telemetry.make_recorder(scene, path=str(path))
+        recorder = telemetry.make_recorder(scene, path=str(path)) if recorded else None
+        if recorder is None:
+            clocks.loop_started()
+            for _ in range(steps):
+                advance()
+            clocks.loop_done()
+            return clocks
         recorder.start(sim)
-        advance, record = sim.step, recorder.step
-        clocks.wall, clocks.thread = time.perf_counter(), time.thread_time()
+        record = recorder.step
+        clocks.loop_started()
         for _ in range(steps):
             advance()
             record(sim)
         clocks.loop_done()
-        finish_start = time.perf_counter()
         recorder.finish(sim)
-        clocks.fixed = (clocks.wall - clocks.outer) + (time.perf_counter() - finish_start)
+    return clocks
+
+
+class Quiet:
+    def __getattr__(self, level):
+        return lambda text: None
+
+
+def node_loop(scene, steps, path, recorded, rate):
+    """ArmSimCore.tick() as the node's timer calls it (no transport; ticks back to back)."""
+    overrides = {"scene": scene.name, "step_size": STEP, "publish_rate": rate}
+    if recorded:
+        overrides["rerun_path"] = str(path)
+    with Clocks() as clocks:
+        core = node_core.ArmSimCore(node_core.resolve_parameters(overrides), Quiet(),
+                                    wall_clock=lambda: 0.0, start_stamp_ns=0)
+        tick = core.tick
+        clocks.loop_started()
+        for _ in range(steps // core.config.steps_per_tick):
+            tick(0.0)
+        clocks.loop_done()
+        core.finish()
+    return clocks
+
+
+def run_loop(scene, steps, path, recorded):
+    """`arm-sim run [--rerun PATH]`: cli.run_recorded with the recorder --rerun builds."""
+    sim = Simulator(scene)
+    with Clocks() as clocks:
+        recorders = [telemetry.make_recorder(path=str(path))] if recorded else []
+        for recorder in recorders:
+            recorder.start(sim)
+        clocks.loop_started()
+        cli.run_recorded(sim, steps * STEP, recorders)
+        clocks.loop_done()
+        for recorder in recorders:
+            recorder.finish(sim)
     return clocks
 
 
@@ -90,7 +132,7 @@ def per_sample(scene, steps, path):
     with Clocks() as clocks:
         stream = rr.RecordingStream("arm_sim_bench")
         stream.save(str(path))
-        clocks.wall, clocks.thread = time.perf_counter(), time.thread_time()
+        clocks.loop_started()
         for k in range(steps):
             sim.step()
             y = sim.state
@@ -111,11 +153,26 @@ def per_sample(scene, steps, path):
                 stream.log("arm/links", rr.LineStrips2D([[base, elbow], [elbow, tip]]))
                 stream.log("arm/joints", rr.Points2D([base, elbow, tip]))
         clocks.loop_done()
-        finish_start = time.perf_counter()
         stream.flush()
         stream.disconnect()
-        clocks.fixed = (clocks.wall - clocks.outer) + (time.perf_counter() - finish_start)
     return clocks
+
+
+# (name, function(scene, steps, path), its bar: the same loop without telemetry, or None)
+def modes():
+    return [
+        ("node tick 100 Hz, bare", lambda *a: node_loop(*a, False, 100.0), None),
+        ("node tick 100 Hz + telemetry", lambda *a: node_loop(*a, True, 100.0),
+         "node tick 100 Hz, bare"),
+        ("node tick 1 kHz, bare", lambda *a: node_loop(*a, False, 1000.0), None),
+        ("node tick 1 kHz + telemetry", lambda *a: node_loop(*a, True, 1000.0),
+         "node tick 1 kHz, bare"),
+        ("arm-sim run, bare", lambda *a: run_loop(*a, False), None),
+        ("arm-sim run --rerun", lambda *a: run_loop(*a, True), "arm-sim run, bare"),
+        ("Simulator.step(), bare", lambda *a: step_loop(*a, False), None),
+        ("step() + recorder.step(sim)", lambda *a: step_loop(*a, True),
+         "Simulator.step(), bare"),
+    ]
 
 
 def energies_scalar(states, arm, gravity):
@@ -134,13 +191,35 @@ def energies_vectorised(states, arm, gravity):
     return time.perf_counter() - start
 
 
-def best(run, repeat, *args):
-    """Each clock's least disturbed reading over `repeat` runs."""
-    runs = [run(*args) for _ in range(repeat)]
-    fastest = runs[0]
-    for name in ("loop_wall", "loop_thread", "total_process", "fixed"):
-        setattr(fastest, name, min(getattr(c, name) for c in runs))
-    return fastest
+class Runs:
+    """One mode's clocks over the rounds, at `steps` and at 2 x steps."""
+
+    def __init__(self, steps):
+        self.steps, self.short, self.long, self.size = steps, [], [], None
+
+    def per_step(self, clock):
+        """µs per step of the longer runs, one per round."""
+        return [getattr(c, clock) / (2 * self.steps) * 1e6 for c in self.long]
+
+    def process(self):
+        """Marginal process CPU µs per step: the longer run minus the shorter, per extra
+        step, so the fixed start/finish cost drops out."""
+        return (min(c.total_process for c in self.long)
+                - min(c.total_process for c in self.short)) / self.steps * 1e6
+
+
+def measure(table, scene, steps, repeat, tmp):
+    """Every mode of `table` at steps and 2 x steps, round-robin: {name: Runs}."""
+    runs = {name: Runs(steps) for name, _, _ in table}
+    path = Path(tmp) / "bench.rrd"
+    for _ in range(repeat):
+        for name, run, _ in table:
+            runs[name].short.append(run(scene, steps, path))
+            runs[name].long.append(run(scene, 2 * steps, path))
+            if path.exists():
+                runs[name].size = path.stat().st_size / (2 * steps)
+                path.unlink()
+    return runs
 
 
 def main() -> None:
@@ -150,38 +229,43 @@ def main() -> None:
                         help="simulated seconds of the shorter run (the longer is twice that)")
     parser.add_argument("--per-sample-seconds", type=float, default=1.0,
                         help="simulated seconds for the (slow) per-sample sink")
-    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--repeat", type=int, default=7, help="rounds")
     args = parser.parse_args()
     scene = load_scene(args.scene).replace(step_size=STEP)
-    steps, slow_steps = round(args.seconds / STEP), round(args.per_sample_seconds / STEP)
-
+    steps = round(args.seconds / STEP)
+    table = modes()
     with tempfile.TemporaryDirectory() as tmp:
-        rows = []
-        for name, run, n in (("bare Simulator.step()", bare, steps),
-                             ("batched send_columns (telemetry)", batched, steps),
-                             ("per-sample rr.log", per_sample, slow_steps)):
-            path = Path(tmp) / f"{run.__name__}.rrd"
-            short = best(run, args.repeat, scene, n, path)
-            long = best(run, args.repeat, scene, 2 * n, path)
-            size = path.stat().st_size / (2 * n) if path.exists() else None
-            # Marginal process CPU: the run twice as long minus the run, per extra step,
-            # so the fixed start/finish cost (shown apart) drops out.
-            rows.append((name, 2 * n, long.loop_wall / (2 * n), long.loop_thread / (2 * n),
-                         (long.total_process - short.total_process) / n, long.fixed, size))
-    _, _, base_wall, base_thread, base_process, _, _ = rows[0]
+        runs = measure(table, scene, steps, args.repeat, tmp)
+        slow = ("per-sample rr.log", per_sample, "Simulator.step(), bare")
+        runs |= measure([slow], scene, round(args.per_sample_seconds / STEP),
+                        max(1, args.repeat // 3), tmp)
+        table.append(slow)
+
     print(f"Rerun file-sink overhead, scene {scene.name}, h = {STEP * 1e3:g} ms (1 kHz), "
-          f"best of {args.repeat}; µs per simulated step")
-    print(f"{'mode':34s} {'steps':>6s} {'loop wall':>10s} {'sim thread':>11s} "
+          f"{args.repeat} rounds; µs per simulated step, best and range over the rounds")
+    print(f"{'mode':30s} {'steps':>6s} {'loop wall':>10s} {'(range)':>13s} {'sim thread':>11s} "
           f"{'process CPU':>12s} {'start+finish':>13s} {'bytes/step':>11s}")
-    for name, n, wall, thread, process, fixed, size in rows:
-        print(f"{name:34s} {n:6d} {wall * 1e6:10.2f} {thread * 1e6:11.2f} {process * 1e6:12.2f} "
-              f"{fixed * 1e3:10.1f} ms {'-' if size is None else f'{size:.0f}':>11s}")
-    print(f"{'overhead vs bare':34s} {'':6s} {'loop wall':>10s} {'sim thread':>11s} "
-          f"{'process CPU':>12s}")
-    for name, _, wall, thread, process, _, _ in rows[1:]:
-        print(f"{name:34s} {'':6s} {100 * (wall / base_wall - 1):9.1f}% "
-              f"{100 * (thread / base_thread - 1):10.1f}% "
-              f"{100 * (process / base_process - 1):11.1f}%")
+    for name, _, _ in table:
+        r = runs[name]
+        wall = r.per_step("loop_wall")
+        size = "-" if r.size is None else f"{r.size:.0f}"
+        print(f"{name:30s} {2 * r.steps:6d} {min(wall):10.2f} "
+              f"{f'{min(wall):.2f}–{max(wall):.2f}':>13s} {min(r.per_step('loop_thread')):11.2f} "
+              f"{r.process():12.2f} {min(c.fixed for c in r.long) * 1e3:10.1f} ms {size:>11s}")
+    print()
+    print(f"{'overhead vs the same loop bare':30s} {'loop wall':>10s} {'per round: median':>18s} "
+          f"{'(range)':>15s} {'sim thread':>11s} {'process CPU':>12s}")
+    for name, _, bar in table:
+        if bar is None:
+            continue
+        r, b = runs[name], runs[bar]
+        wall, base = r.per_step("loop_wall"), b.per_step("loop_wall")
+        rounds = [100 * (w / v - 1) for w, v in zip(wall, base)]   # same round, same load
+        thread = min(r.per_step("loop_thread")) / min(b.per_step("loop_thread"))
+        print(f"{name:30s} {100 * (min(wall) / min(base) - 1):9.1f}% "
+              f"{statistics.median(rounds):17.1f}% "
+              f"{f'{min(rounds):.1f} to {max(rounds):.1f}%':>15s} {100 * (thread - 1):10.1f}% "
+              f"{100 * (r.process() / b.process() - 1):11.1f}%")
 
     sim = Simulator(scene)
     states = []

@@ -308,8 +308,9 @@ def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
     sends = []
     original = telemetry.RerunRecorder._send
     monkeypatch.setattr(telemetry.RerunRecorder, "_send",
-                        lambda self, sim, rows, events: (sends.append(len(rows)),
-                                                         original(self, sim, rows, events)))
+                        lambda self, sim, runs, states, events: (
+                            sends.append(sum(steps for _, _, steps in runs)),
+                            original(self, sim, runs, states, events)))
     samples, _ = record(scene, tmp_path / "batched.rrd")
     assert sends == [37] * 6 + [251 - 37 * 6]
     columns = read_back(tmp_path / "batched.rrd")
@@ -419,18 +420,21 @@ def test_arm_sim_run_with_an_unwritable_recording_still_runs(tmp_path, capsys, c
     assert [r.message for r in caplog.records if "cannot write" in r.message] != []
 
 
+class Log:
+    def __init__(self):
+        self.lines = []
+
+    def __getattr__(self, level):
+        return lambda text: self.lines.append((level, text))
+
+
 def test_the_node_writes_a_recording_in_process(tmp_path):
     node_core = pytest.importorskip("arm_sim_ros.node_core")
     path = tmp_path / "node.rrd"
     config = node_core.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
                                            "publish_rate": 50.0})
-    lines = []
-
-    class Log:
-        def __getattr__(self, level):
-            return lambda text: lines.append((level, text))
-
-    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
+    log = Log()
+    core = node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0, start_stamp_ns=0)
     reference = Simulator(config.scene)
     samples = [reference.sample()]
     for _ in range(25):
@@ -443,4 +447,69 @@ def test_the_node_writes_a_recording_in_process(tmp_path):
     assert_equals_core(columns, samples)
     assert columns["energy/kinetic"]["sim_time"][-1] == round(0.5 * 1e9)
     assert any("start" in text for text in columns["events"]["TextLog:text"])
-    assert not [text for level, text in lines if level in ("warning", "error")]
+    assert not [text for level, text in log.lines if level in ("warning", "error")]
+
+
+def test_the_node_records_each_ticks_command_with_its_steps(tmp_path):
+    """The node hands over a tick's states at once (step_batch); a command taken between
+    ticks holds for the next tick's steps, as in the core."""
+    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    path = tmp_path / "commanded.rrd"
+    config = node_core.resolve_parameters({
+        "scene": "release", "policy": "command_gravity_compensation", "damping": 0.2,
+        "rerun_path": str(path), "publish_rate": 20.0, "command_timeout": 0.0})
+    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
+    reference = Simulator(config.scene)
+    samples = [reference.sample()]
+    for k in range(12):
+        command = [math.sin(k), 0.3 * k - 1.0]
+        core.on_command(command)
+        reference.set_command(*command)
+        core.tick(0.0)
+        for _ in range(config.steps_per_tick):
+            reference.step()
+            samples.append(reference.sample())
+    core.finish()
+    columns = read_back(path)
+    assert config.steps_per_tick == 5
+    assert {"work/actuator", "joints/torque", "energy/dissipated"} <= set(columns)
+    assert_equals_core(columns, samples)
+
+
+class StepSpy:
+    """A recorder with the per-step protocol only: step(sim) after every step."""
+
+    def __init__(self):
+        self.seen = []
+
+    def start(self, sim):
+        self.seen.append(sim.steps)
+
+    def step(self, sim):
+        self.seen.append(sim.steps)
+
+    def finish(self, sim):
+        pass
+
+
+class BatchSpy(StepSpy):
+    """A recorder with step_batch: the states of many steps in one call."""
+
+    def step_batch(self, sim, states):
+        self.seen += range(sim.steps - len(states) + 1, sim.steps + 1)
+        self.states = getattr(self, "states", []) + list(states)
+
+
+def test_arm_sim_runs_loop_gives_every_step_to_either_protocol(monkeypatch):
+    monkeypatch.setattr(cli, "RUN_BATCH_STEPS", 7)
+    scene = load_scene("damped_release").replace(duration=0.5)
+    sim, per_step, batched = Simulator(scene), StepSpy(), BatchSpy()
+    for recorder in (per_step, batched):
+        recorder.start(sim)
+    drift = cli.run_recorded(sim, 0.5, [per_step, batched])
+    reference = Simulator(scene)
+    states = []
+    assert drift == reference.run(0.5, lambda s: states.append(s.state))
+    assert per_step.seen == batched.seen == list(range(51))
+    assert batched.states == states
+    assert cli.run_recorded(sim, 0.0, [batched]) == 0.0 and len(batched.seen) == 51
