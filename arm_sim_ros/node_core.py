@@ -23,6 +23,7 @@ COMMAND_TOPIC = "joint_torque_commands"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 COMMAND_POLICIES = ("command", "command_gravity_compensation")
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
+RECORD_EVERY = 10                 # steps collected before the recorder gets them in one call
 WARN_PERIOD = 1.0                 # seconds between repeated warnings of one kind
 
 # Diagnostic levels, as diagnostic_msgs/DiagnosticStatus numbers them.
@@ -299,6 +300,7 @@ class ArmSimCore:
         self.late_ticks = 0
         self.command_timeouts = 0
         self.recorder = None
+        self._unrecorded = []             # states of steps the recorder has not seen yet
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self._attach(recorder if recorder is not None else self._make_recorder())
@@ -358,6 +360,8 @@ class ArmSimCore:
     def _call_recorder(self, method: str, *args) -> None:
         if self.recorder is None:
             return
+        if self._unrecorded and method != "step_batch":
+            self._hand_over()             # the steps first, then what came after them
         try:
             getattr(self.recorder, method)(*args)
         except Exception as error:  # a failing sink is dropped, the simulation goes on
@@ -388,8 +392,13 @@ class ArmSimCore:
             self.log.info(f"torque command {list(data)} N m, held until the next one")
         self.command = (float(data[0]), float(data[1]))
         self.command_received_at = self.sim.time
-        self.sim.set_command(*self.command)
+        self._set_command(*self.command)
         return None
+
+    def _set_command(self, tau1: float, tau2: float) -> None:
+        """Hold a new command; the steps taken under the old one reach the recorder first."""
+        self._hand_over()
+        self.sim.set_command(tau1, tau2)
 
     def _refusal(self, data) -> str | None:
         try:
@@ -415,7 +424,7 @@ class ArmSimCore:
             self.command_timeouts += 1
             if self.command != (0.0, 0.0):
                 self.command = (0.0, 0.0)
-                self.sim.set_command(0.0, 0.0)
+                self._set_command(0.0, 0.0)
                 self.log.warning(f"no torque command for {timeout:g} s: torque dropped to zero")
                 self._call_recorder("event", "command timeout: torque dropped to zero")
 
@@ -442,6 +451,7 @@ class ArmSimCore:
         if sim.holding or not all(isfinite(v) for v in sim.state):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
+            self._hand_over()
             sim.state, sim.steps = before
             self.held = True
             self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
@@ -451,24 +461,31 @@ class ArmSimCore:
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
 
     def _step_recorded(self, sim, steps: int) -> None:
-        """`steps` physics steps, each seen by the recorder: as one step_batch(sim, states)
-        call per tick when it has one (a Python call per step costs more than logging's
-        10 % budget), else step(sim) after every step."""
+        """`steps` physics steps, each seen by the recorder: their states collected and
+        handed over in one step_batch(sim, states) call per RECORD_EVERY steps when it has
+        one (a Python call per step, or per tick at one step a tick, costs more than
+        logging's 10 % budget), else step(sim) after every step. Anything else sent to the
+        recorder, a new command or a restart hands the collected steps over first."""
         advance, recorder = sim.step, self.recorder
         if recorder is None:
             for _ in range(steps):
                 advance()
         elif hasattr(recorder, "step_batch"):
-            states = []
-            keep = states.append
+            keep = self._unrecorded.append
             for _ in range(steps):
                 advance()
                 keep(sim.state)
-            self._call_recorder("step_batch", sim, states)
+            if len(self._unrecorded) >= RECORD_EVERY:
+                self._hand_over()
         else:
             for _ in range(steps):
                 advance()
                 self._call_recorder("step", sim)
+
+    def _hand_over(self) -> None:
+        states, self._unrecorded = self._unrecorded, []
+        if states:
+            self._call_recorder("step_batch", self.sim, states)
 
     def _step_ns(self) -> int:
         return round(self.sim.step_size * 1e9)
@@ -488,6 +505,7 @@ class ArmSimCore:
         self._restart(self.config, "reset to the scene's initial state")
 
     def _restart(self, config: NodeConfig, why: str) -> None:
+        self._hand_over()                 # they belong to the simulator about to go
         self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
         self._configure(config)
         self._call_recorder("start", self.sim)

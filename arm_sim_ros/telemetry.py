@@ -226,11 +226,11 @@ class RerunRecorder:
             return
         first = sim.steps - n + 1
         command = tuple(sim.dynamics.command) if self._commanded else None
-        runs = self._runs
-        if runs and runs[-1][0] + runs[-1][2] == first and runs[-1][1] == command:
-            runs[-1][2] += n                  # the run goes on: same command, next step
+        last = self._runs[-1] if self._runs else None
+        if last is not None and last[0] + last[2] == first and last[1] == command:
+            last[2] += n                      # the run goes on: same command, next step
         else:
-            runs.append([first, command, n])
+            self._runs.append([first, command, n])
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
         self._waiting += n
         if self._waiting >= self._check_at:

@@ -513,3 +513,62 @@ def test_arm_sim_runs_loop_gives_every_step_to_either_protocol(monkeypatch):
     assert per_step.seen == batched.seen == list(range(51))
     assert batched.states == states
     assert cli.run_recorded(sim, 0.0, [batched]) == 0.0 and len(batched.seen) == 51
+
+
+def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_order(tmp_path):
+    """The node collects steps over ticks (RECORD_EVERY) before handing them over; an event,
+    a new command, a reset and a hold each hand over what was collected first, so every
+    row, command and text line lands at its own step."""
+    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    path = tmp_path / "ticks.rrd"
+    config = node_core.resolve_parameters({"scene": "release", "rerun_path": str(path),
+                                           "command_timeout": 0.0})
+    assert config.steps_per_tick == 1
+    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
+    reference = Simulator(config.scene)
+    kinetic, torque = [reference.sample().kinetic], [reference.sample().tau]
+    for k in range(23):
+        if k == 7:
+            core.on_command([float("nan"), 0.0])               # an event, between ticks
+        if k in (3, 12):
+            core.on_command([0.5 * k, -1.0])
+            reference.set_command(0.5 * k, -1.0)
+        if k == 17:
+            core.reset()
+            reference.reset()
+            kinetic.append(reference.sample().kinetic)
+            torque.append(reference.sample().tau)
+        core.tick(0.0)
+        reference.step()
+        kinetic.append(reference.sample().kinetic)
+        torque.append(reference.sample().tau)
+    core.finish()
+    columns = read_back(path)
+    h_ns = round(config.scene.step_size * 1e9)
+    assert columns["energy/kinetic"]["sim_time"] == (
+        [k * h_ns for k in range(18)] + [k * h_ns for k in range(17, 24)])
+    assert np.max(np.abs(scalars(columns["energy/kinetic"])[:, 0] - kinetic)) <= TOL
+    assert np.max(np.abs(scalars(columns["joints/torque"]) - torque)) <= TOL
+    # A line lands on the next step recorded: the refusal after step 7 on step 8; the
+    # restart's own line on its initial row, the node's reason on the step after it.
+    events = list(zip(columns["events"]["TextLog:text"], columns["events"]["sim_time"]))
+    assert ("refused command: tau1 = nan is not finite", 8 * h_ns) in events
+    assert [t for text, t in events if text.startswith("scene release start:")] == [0, 17 * h_ns]
+    assert ("reset to the scene's initial state", 18 * h_ns) in events
+
+
+def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
+    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    path = tmp_path / "held.rrd"
+    config = node_core.resolve_parameters({"scene": "release", "rerun_path": str(path),
+                                           "initial_velocities": [1e200, 1e200]})
+    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
+    for _ in range(4):
+        core.tick(0.0)
+    core.finish()
+    assert core.held
+    columns = read_back(path)
+    # The start and the refused step (the last finite state, held), each at its own time.
+    assert columns["joints/angle"]["sim_time"] == [0, round(config.scene.step_size * 1e9)]
+    assert np.all(np.isfinite(scalars(columns["joints/velocity"])))
+    assert any(text.startswith("integration not finite") for text in columns["events"]["TextLog:text"])
