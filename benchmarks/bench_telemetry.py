@@ -2,7 +2,8 @@
 the node and `arm-sim run --rerun` take, each side by side with the same loop bare:
 
 - node: ArmSimCore.tick() (no transport) at 100 Hz (10 steps per tick) and 1 kHz (1 step
-  per tick); with telemetry each tick hands its states to RerunRecorder.step_batch();
+  per tick); with telemetry the node hands the states of every node_core.RECORD_EVERY
+  steps to RerunRecorder.step_batch() in one call;
 - arm-sim run: cli.run_recorded() (Simulator.run, which also tracks the largest residual),
   bare and with the recorder the --rerun flag builds (step_batch every 1000 steps);
 - per-step step(): Simulator.step() + RerunRecorder.step(sim) after each, the protocol a

@@ -428,22 +428,31 @@ class Log:
         return lambda text: self.lines.append((level, text))
 
 
-def test_the_node_writes_a_recording_in_process(tmp_path):
-    node_core = pytest.importorskip("arm_sim_ros.node_core")
-    path = tmp_path / "node.rrd"
-    config = node_core.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
-                                           "publish_rate": 50.0})
+def run_node(node_core, config, ticks, command=None):
+    """Tick an in-process node beside a Simulator of its scene, sending command(k) before
+    tick k if given; return its log, the core's samples and the recording read back."""
     log = Log()
     core = node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0, start_stamp_ns=0)
     reference = Simulator(config.scene)
     samples = [reference.sample()]
-    for _ in range(25):
+    for k in range(ticks):
+        if command is not None:
+            core.on_command(command(k))
+            reference.set_command(*command(k))
         core.tick(0.0)
         for _ in range(config.steps_per_tick):
             reference.step()
             samples.append(reference.sample())
     core.finish()
-    columns = read_back(path)
+    return log, samples, read_back(config.values["rerun_path"])
+
+
+def test_the_node_writes_a_recording_in_process(tmp_path):
+    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    path = tmp_path / "node.rrd"
+    config = node_core.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
+                                           "publish_rate": 50.0})
+    log, samples, columns = run_node(node_core, config, ticks=25)
     assert_equals_core(columns, samples)
     assert columns["energy/kinetic"]["sim_time"][-1] == round(0.5 * 1e9)
     assert any("start" in text for text in columns["events"]["TextLog:text"])
@@ -458,19 +467,8 @@ def test_the_node_records_each_ticks_command_with_its_steps(tmp_path):
     config = node_core.resolve_parameters({
         "scene": "release", "policy": "command_gravity_compensation", "damping": 0.2,
         "rerun_path": str(path), "publish_rate": 20.0, "command_timeout": 0.0})
-    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
-    reference = Simulator(config.scene)
-    samples = [reference.sample()]
-    for k in range(12):
-        command = [math.sin(k), 0.3 * k - 1.0]
-        core.on_command(command)
-        reference.set_command(*command)
-        core.tick(0.0)
-        for _ in range(config.steps_per_tick):
-            reference.step()
-            samples.append(reference.sample())
-    core.finish()
-    columns = read_back(path)
+    _, samples, columns = run_node(node_core, config, ticks=12,
+                                   command=lambda k: [math.sin(k), 0.3 * k - 1.0])
     assert config.steps_per_tick == 5
     assert {"work/actuator", "joints/torque", "energy/dissipated"} <= set(columns)
     assert_equals_core(columns, samples)
@@ -571,4 +569,5 @@ def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
     # The start and the refused step (the last finite state, held), each at its own time.
     assert columns["joints/angle"]["sim_time"] == [0, round(config.scene.step_size * 1e9)]
     assert np.all(np.isfinite(scalars(columns["joints/velocity"])))
-    assert any(text.startswith("integration not finite") for text in columns["events"]["TextLog:text"])
+    assert any(text.startswith("integration not finite")
+               for text in columns["events"]["TextLog:text"])
