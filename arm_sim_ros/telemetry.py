@@ -182,8 +182,8 @@ class RerunRecorder:
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
-        # Steps waiting to be sent: their states flattened into one array of doubles (40
-        # bytes a step rather than ~200 as tuples kept alive, and nothing left to convert
+        # Steps waiting to be sent: their states flattened into one array of doubles (8 bytes
+        # a number rather than ~40 as tuples of floats kept alive, and nothing left to convert
         # while holding the GIL in the sender), and runs of consecutive steps under one held
         # command: [first step, command (None without a command policy), steps].
         self._states, self._runs, self._events = array("d"), [], []   # ...and text lines
@@ -216,9 +216,9 @@ class RerunRecorder:
 
     def step_batch(self, sim, states) -> None:
         """After len(states) physics steps: their states in order, the last being sim.state,
-        taken under the command sim holds now (commands change between ticks, not within).
-        The node calls this once per tick; the states are copied, so the caller may reuse
-        the list. Nothing else happens here (see flush)."""
+        taken under the command sim holds now (the node hands its steps over before a new
+        command). The node calls this every 10 steps, `arm-sim run` every 1000; the states
+        are copied, so the caller may reuse the list. Nothing else happens here (see flush)."""
         if sim is not self.sim:
             self._bind(sim)
         n = len(states)
