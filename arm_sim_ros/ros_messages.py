@@ -274,18 +274,32 @@ def discovery_range_from_env(env=None) -> str:
 
 def discovery_config(env=None) -> str:
     """Cyclone configuration for this process, built as rmw_cyclonedds' check_create_domain
-    builds it: a discovery fragment, then CYCLONEDDS_URI (later fragments override)."""
+    builds it: a discovery fragment, then CYCLONEDDS_URI (later fragments override).
+    One addition: on LOCALHOST it selects the loopback interface (with the default one when
+    there are static peers), unless CYCLONEDDS_URI selects interfaces itself (Cyclone refuses
+    one selected twice).
+    rmw peers announce themselves to 127.0.0.1, and Cyclone 11 ignores discovery arriving on
+    an interface it has not selected: a ROS node started after ours would never find it."""
     env = os.environ if env is None else env
     scope = discovery_range_from_env(env)
     peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
+    user_uri = env.get("CYCLONEDDS_URI", "")
     add_localhost = scope == "LOCALHOST"
     add_peers = scope in ("SUBNET", "LOCALHOST")
     no_multicast = scope in ("LOCALHOST", "OFF")
     fragment = ""
     if add_localhost or (add_peers and peers) or no_multicast:
         fragment = "<CycloneDDS><Domain>"
+        general = ""
+        if add_localhost and not _selects_interfaces(user_uri):
+            # Static peers are other hosts: the default interface reaches them.
+            default = '<NetworkInterface autodetermine="true"/>' if peers else ""
+            general += (f'<Interfaces>{default}<NetworkInterface address="127.0.0.1"/>'
+                        "</Interfaces>")
         if no_multicast:
-            fragment += "<General><AllowMulticast>false</AllowMulticast></General>"
+            general += "<AllowMulticast>false</AllowMulticast>"
+        if general:
+            fragment += f"<General>{general}</General>"
         if scope == "OFF":
             # Only a participant with this exact tag (this pid) could discover us.
             fragment += (f"<Discovery><ParticipantIndex>none</ParticipantIndex>"
@@ -298,7 +312,21 @@ def discovery_config(env=None) -> str:
             fragment += ("<Peers>" + "".join(f"<Peer address={quoteattr(p)}/>" for p in listed)
                          + "</Peers>")
         fragment += "</Discovery></Domain></CycloneDDS>,"
-    return fragment + env.get("CYCLONEDDS_URI", "")
+    return fragment + user_uri
+
+
+def _selects_interfaces(uri: str) -> bool:
+    """Whether a CYCLONEDDS_URI (XML fragments and/or files, comma-separated) names interfaces."""
+    for part in filter(None, (p.strip() for p in uri.split(","))):
+        if not part.startswith("<"):
+            try:
+                with open(part.removeprefix("file://")) as stream:
+                    part = stream.read()
+            except OSError:
+                continue          # Cyclone itself reports a file it cannot read
+        if "NetworkInterface" in part:
+            return True
+    return False
 
 
 def loopback_config(tag: str = "") -> str:

@@ -1,10 +1,15 @@
 """The arm_sim node on rclpy: the dds tests' scenarios where ROS 2 Jazzy is sourced.
 
 Skips cleanly where rclpy cannot be imported. Each test has its own context and domain id,
-localhost discovery, and drives the node's ticks itself (its timers are cancelled), so the
-results do not depend on wall time. Expected values come from a core Simulator.
+localhost discovery tagged with this process (concurrent runs never meet), and drives the
+node's ticks itself (its timers are cancelled), so the results do not depend on wall time.
+Expected values come from a core Simulator. The last test runs the dds transport as its own
+process and talks to it from rclpy: the two Cyclone versions must meet on the wire.
 """
 import math
+import os
+import subprocess
+import sys
 import time
 
 import pytest
@@ -23,6 +28,9 @@ from arm_sim_ros.transports.rclpy_transport import ArmSimNode  # noqa: E402
 from node_oracle import assert_matches, expected_states  # noqa: E402
 
 TIMEOUT = 5.0
+# rmw_cyclonedds appends CYCLONEDDS_URI to its own configuration, as the dds transport does.
+DISCOVERY_TAG = (f"<CycloneDDS><Domain><Discovery><Tag>arm_sim_test_node_rclpy_{os.getpid()}"
+                 "</Tag></Discovery></Domain></CycloneDDS>")
 
 
 class FakeClock:
@@ -37,6 +45,7 @@ class FakeClock:
 def ros(request, monkeypatch):
     """(make_node, peer) on a private domain; everything is shut down afterwards."""
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("CYCLONEDDS_URI", DISCOVERY_TAG)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=request.param)
     executor = SingleThreadedExecutor(context=context)
@@ -170,3 +179,42 @@ def test_diagnostics_and_reset_service(ros):
     future = client.call_async(Trigger.Request())
     peer.spin_until(future.done)
     assert future.result().success and node.core.sim.steps == 0
+
+
+def test_a_dds_transport_node_started_first_is_found_by_a_later_rclpy_peer(monkeypatch):
+    """`arm_sim_node --transport dds` already running when a ROS 2 node starts, as in
+    `ros2 topic echo /joint_states`: the peer sees /arm_sim, its JointStates and its reply to a
+    torque command. (Cyclone 11 once ignored the late rmw peer's announcement on 127.0.0.1.)"""
+    env = dict(os.environ, ROS_DOMAIN_ID="27", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               CYCLONEDDS_URI=DISCOVERY_TAG)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "arm_sim_ros.node", "--transport", "dds", "--duration", "60",
+         "--quiet", "--ros-args", "-p", "gravity:=0.0"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "scene release started" in process.stderr.readline()   # its endpoints exist
+        for name in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI"):
+            monkeypatch.setenv(name, env[name])
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=27)
+        executor = SingleThreadedExecutor(context=context)
+        try:
+            peer = Peer(context, executor)
+            peer.spin_until(lambda: peer.joint_states and ("arm_sim", "/")
+                            in peer.node.get_node_names_and_namespaces())   # ros2 node list
+            assert list(peer.joint_states[0].name) == ["shoulder_joint", "elbow_joint"]
+
+            def pushed():
+                peer.commands.publish(Float64MultiArray(data=[1.0, 0.0]))
+                return list(peer.joint_states[-1].effort) == [1.0, 0.0]
+            peer.spin_until(pushed)
+            peer.node.destroy_node()
+        finally:
+            executor.shutdown()
+            rclpy.shutdown(context=context)
+        process.terminate()                    # SIGTERM ends the node as Ctrl-C does
+        _, err = process.communicate(timeout=TIMEOUT)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    assert "torque command [1.0, 0.0] N m" in err and "refused" not in err

@@ -135,6 +135,23 @@ def test_localhost_range_disables_multicast_and_peers_localhost_then_user_config
     assert text.endswith(",file:///user.xml")  # the user's file is read last and wins
 
 
+def test_localhost_selects_loopback_unless_the_user_config_names_interfaces(tmp_path):
+    # Cyclone 11 ignores a later rmw peer's announcement unless 127.0.0.1 is selected.
+    loopback = '<NetworkInterface address="127.0.0.1"/>'
+    text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+    assert f"<Interfaces>{loopback}</Interfaces>" in text
+    text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                               "ROS_STATIC_PEERS": "10.0.0.2"})
+    assert f'<Interfaces><NetworkInterface autodetermine="true"/>{loopback}</Interfaces>' in text
+    user_file = tmp_path / "cyclonedds.xml"
+    user_file.write_text(m.loopback_config())
+    for uri in (m.loopback_config(), f"file://{user_file}", f"<Tag/>, {user_file}"):
+        text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                                   "CYCLONEDDS_URI": uri})
+        assert text.count("<Interfaces>") == uri.count("<Interfaces>")   # only the user's
+    assert "Interfaces" not in m.discovery_config({"ROS_STATIC_PEERS": "10.0.0.2"})
+
+
 def test_subnet_keeps_multicast_and_adds_static_peers():
     text = m.discovery_config({"ROS_STATIC_PEERS": "10.0.0.2"})
     assert "AllowMulticast" not in text and '<Peer address="10.0.0.2"/>' in text
