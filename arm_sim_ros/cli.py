@@ -17,9 +17,10 @@ from .model import ParameterError
 from .scene import Scene, SceneError, load_scene, parse_value, preset_names
 
 # Modules that contribute subcommands of their own (each defines add_parser).
-SUBCOMMAND_MODULES: list[str] = ["arm_sim_ros.record", "arm_sim_ros.send_torque"]
-
-SUBCOMMAND_MODULES += ["arm_sim_ros.study", "arm_sim_ros.batch"]   # accuracy, batch
+SUBCOMMAND_MODULES = ["arm_sim_ros.study",        # accuracy
+                      "arm_sim_ros.batch",        # batch
+                      "arm_sim_ros.record",       # record
+                      "arm_sim_ros.send_torque"]  # send-torque
 
 CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
                "work", "dissipated", "residual")
