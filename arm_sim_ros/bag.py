@@ -24,7 +24,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from .cli import UsageError, scene_from_args
-from .node_core import ERROR, NODE_NAME, OK, SPECS, ParameterRefused, _steps_per_tick, split_stamp
+from .node_core import (ERROR, NODE_NAME, OK, SPECS, ParameterRefused, _steps_per_tick,
+                        diagnostic_values, split_stamp)
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 BAG_VERSION = 9  # the rosbag2 metadata version Jazzy writes
@@ -195,7 +196,7 @@ def nanoseconds(sim) -> int:
 
 
 # Policies whose torque is a command: what the offline run applied is recorded as one.
-COMMAND_POLICIES = ("constant", "command", "command_gravity_compensation")
+APPLIED_COMMAND_POLICIES = ("constant", "command", "command_gravity_compensation")
 
 
 class RunBag:
@@ -209,7 +210,7 @@ class RunBag:
 
     def start(self, sim) -> None:
         self.writer = BagWriter(self.path)
-        self.commands = sim.scene.policy in COMMAND_POLICIES
+        self.commands = sim.scene.policy in APPLIED_COMMAND_POLICIES
         for topic, msgtype in NODE_TOPICS.items():
             if self.commands or topic != "/joint_torque_commands":
                 self.writer.add_topic(topic, msgtype)
@@ -242,22 +243,13 @@ class RunBag:
 
     def diagnose(self, sim) -> None:
         """The node's diagnostics, same keys; an offline run refuses and misses nothing."""
-        s, t = sim.sample(), nanoseconds(sim)
-        wall = perf_counter() - self.wall_start
+        t, wall = nanoseconds(sim), perf_counter() - self.wall_start
         command = applied_command(sim) if self.commands else (0.0, 0.0)
         # A refused (non-finite) step leaves the last finite state in place, as in the node.
         level, message = (ERROR, sim.fault) if sim.holding else (OK, "running")
-        self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=[
-            ("scene", sim.scene.name), ("policy", sim.scene.policy),
-            ("sim_time", f"{s.t:.6f}"),
-            ("real_time_factor", f"{s.t / wall:.3f}" if wall > 0 else "inf"),
-            ("energy_residual", "held" if sim.holding else f"{s.residual:.3e}"),
-            ("max_abs_energy_residual", f"{self.max_abs_residual:.3e}"),
-            ("received_commands", "0"), ("refused_commands", "0"), ("late_ticks", "0"),
-            ("command_timeouts", "0"),
-            ("command", f"{command[0]:g} {command[1]:g}"),
-            ("steps_per_tick", str(self.publish_steps)),
-        ]))
+        values = diagnostic_values(sim, f"{sim.time / wall:.3f}" if wall > 0 else "inf",
+                                   self.max_abs_residual, sim.holding, command, self.publish_steps)
+        self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=values))
         self.last_diagnostics = sim.steps
 
 

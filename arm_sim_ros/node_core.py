@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from math import isfinite
 
 from .model import ParameterError
-from .scene import FIELD_KINDS, Scene, SceneError, load_scene
+from .scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 from .simulator import Simulator
 
 NODE_NAME = "arm_sim"
@@ -100,36 +100,25 @@ PARAMETERS = (
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
+SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair"}   # node kind -> scene kind
 
 
 def coerce(spec: ParameterSpec, value):
-    """The value in the parameter's kind, or ParameterRefused. Integers pass as doubles
-    because `-p publish_rate:=100` arrives as an integer."""
+    """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
+    checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
     kind, name = spec.kind, spec.name
-
-    def number(v, what=name):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ParameterRefused(name, f"{what} must be a number, got {v!r}")
-        if not isfinite(v):
-            raise ParameterRefused(name, f"{what} = {v} is not finite")
-        return float(v)
-
-    if kind == "float":
-        return number(value)
+    if kind in SCENE_KINDS:
+        try:
+            value = coerce_value(name, SCENE_KINDS[kind], value)
+        except SceneError as error:
+            raise ParameterRefused(name, str(error)) from None
+        return list(value) if kind == "float_pair" else value
     if kind == "bool":
         if not isinstance(value, bool):
             raise ParameterRefused(name, f"must be true or false, got {value!r}")
         return value
-    if kind == "str":
-        if not isinstance(value, str):
-            raise ParameterRefused(name, f"must be text, got {value!r}")
-        return value
     if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
         raise ParameterRefused(name, f"must be a list, got {value!r}")
-    if kind == "float_pair":
-        if len(value) != 2:
-            raise ParameterRefused(name, f"needs two numbers (one per joint or link), got {list(value)}")
-        return [number(v, f"{name}[{i}]") for i, v in enumerate(value)]
     if not all(isinstance(v, str) for v in value):
         raise ParameterRefused(name, f"must be a list of text, got {list(value)!r}")
     return list(value)
@@ -261,6 +250,29 @@ class DiagnosticData:
     message: str
     hardware_id: str
     values: list           # [(key, value text)]
+
+
+COUNTERS = ("received_commands", "refused_commands", "late_ticks", "command_timeouts")
+
+
+def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held: bool,
+                      command, steps_per_tick: int, counters=None) -> list:
+    """The (key, text) pairs of the simulation's DiagnosticStatus: the node's, and those an
+    offline `arm-sim run --bag` writes (its counters stay 0)."""
+    counters = counters or {}
+    return [
+        ("scene", sim.scene.name), ("policy", sim.scene.policy),
+        ("sim_time", f"{sim.time:.6f}"), ("real_time_factor", real_time_factor),
+        ("energy_residual", "held" if held else f"{sim.residual():.3e}"),
+        ("max_abs_energy_residual", f"{max_abs_residual:.3e}"),
+        *((name, str(counters.get(name, 0))) for name in COUNTERS),
+        ("command", f"{command[0]:g} {command[1]:g}"),
+        ("steps_per_tick", str(steps_per_tick)),
+        # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.
+        ("substeps_per_step", str(sim.substeps)),
+        ("substeps_taken", str(sim.substeps_taken)),
+        ("refused_steps", str(sim.refused_steps)),
+    ]
 
 
 def split_stamp(stamp_ns: int) -> tuple[int, int]:
@@ -539,22 +551,9 @@ class ArmSimCore:
             level, message = WARN, f"{new_refused} refused commands, {new_late} late ticks in the last interval"
         else:
             level, message = OK, "running"
-        residual = "held" if self.held else f"{self.sim.residual():.3e}"
-        values = [
-            ("scene", self.config.scene.name), ("policy", self.config.scene.policy),
-            ("sim_time", f"{self.sim.time:.6f}"), ("real_time_factor", f"{rtf:.3f}"),
-            ("energy_residual", residual),
-            ("max_abs_energy_residual", f"{self.max_abs_residual:.3e}"),
-            ("received_commands", str(self.received_commands)),
-            ("refused_commands", str(self.refused_commands)), ("late_ticks", str(self.late_ticks)),
-            ("command_timeouts", str(self.command_timeouts)),
-            ("command", f"{self.command[0]:g} {self.command[1]:g}"),
-            ("steps_per_tick", str(self.config.steps_per_tick)),
-            # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.
-            ("substeps_per_step", str(self.sim.substeps)),
-            ("substeps_taken", str(self.sim.substeps_taken)),
-            ("refused_steps", str(self.sim.refused_steps)),
-        ]
+        values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
+                                   self.command, self.config.steps_per_tick,
+                                   {name: getattr(self, name) for name in COUNTERS})
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
 

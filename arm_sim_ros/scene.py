@@ -47,7 +47,8 @@ class Scene:
 
     def __post_init__(self):
         for f in fields(self):
-            object.__setattr__(self, f.name, _coerce(f.name, FIELD_KINDS[f.name], getattr(self, f.name)))
+            object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
+                                                          getattr(self, f.name)))
         # Beyond this sin/cos keep no digit of an angle; nothing physical starts there.
         if max(abs(v) for v in self.initial_positions) > MAX_INITIAL_ANGLE:
             raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
@@ -113,15 +114,19 @@ FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
                         "float" if f.type == "float" else "str") for f in fields(Scene)}
 
 
-def _coerce(name: str, kind: str, value):
+def coerce_value(name: str, kind: str, value):
+    """`value` as the kind ("float", "str" or "pair") needs it, or SceneError saying why.
+    Also the node's check for its own numbers, text and pairs."""
     if kind == "str":
         if not isinstance(value, str):
             raise SceneError(f"{name} must be text, got {value!r}")
         return value
     if kind == "pair":
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
-            raise SceneError(f"{name} needs two numbers (one per joint or link), got {value!r}")
-        return tuple(_coerce(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+            raise SceneError(f"{name} must be a list of two numbers, got {value!r}")
+        if len(value) != 2:
+            raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
+        return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{name} must be a number, got {value!r}")
     value = float(value)

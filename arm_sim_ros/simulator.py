@@ -164,22 +164,23 @@ class Simulator:
     def energy(self, state) -> float:
         return sum(self.energies(state))
 
+    def books(self, state) -> tuple[float, float]:
+        """(actuator work, dissipated energy) carried in a state; 0 for an absent channel."""
+        return (state[self._work_index] if self._work_index is not None else 0.0,
+                state[self._dissipated_index] if self._dissipated_index is not None else 0.0)
+
     def residual(self) -> float:
-        y = self.state
-        work = y[self._work_index] if self._work_index is not None else 0.0
-        dissipated = y[self._dissipated_index] if self._dissipated_index is not None else 0.0
-        return self.energy(y) - self.initial_energy - work + dissipated
+        work, dissipated = self.books(self.state)
+        return self.energy(self.state) - self.initial_energy - work + dissipated
 
     def sample(self) -> Sample:
         y = self.state
         q, qd = (y[0], y[1]), (y[2], y[3])
         kinetic, potential = self.energies(y)
-        return Sample(
-            t=self.time, q=q, qd=qd, tau=tuple(self.dynamics.applied_torque(q)),
-            kinetic=kinetic, potential=potential,
-            work=y[self._work_index] if self._work_index is not None else 0.0,
-            dissipated=y[self._dissipated_index] if self._dissipated_index is not None else 0.0,
-            initial_energy=self.initial_energy)
+        work, dissipated = self.books(y)
+        return Sample(t=self.time, q=q, qd=qd, tau=tuple(self.dynamics.applied_torque(q)),
+                      kinetic=kinetic, potential=potential, work=work, dissipated=dissipated,
+                      initial_energy=self.initial_energy)
 
     def run(self, duration: float, on_step=None) -> float:
         """Advance by `duration` (a whole number of steps); return the largest |residual|

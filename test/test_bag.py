@@ -4,6 +4,7 @@ participant published on the ROS 2 wire, and an interrupted recorder's bag.
 DDS here is loopback only (interface 127.0.0.1, no multicast, peer 127.0.0.1), on domain
 ids 40-59 that no other test module uses.
 """
+import logging
 import os
 import signal
 import subprocess
@@ -16,7 +17,7 @@ import pytest
 import yaml
 from rosbags.rosbag2 import Reader
 
-from arm_sim_ros import cli
+from arm_sim_ros import cli, node_core
 from arm_sim_ros.bag import NODE_TOPICS, TYPESTORE, BagWriter, joint_state
 from arm_sim_ros.scene import load_scene
 from arm_sim_ros.simulator import Simulator
@@ -126,6 +127,8 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
     diagnostics = messages["/diagnostics"]
     assert [t for t, _, _ in diagnostics] == [1_000_000_000, 2_000_000_000, 2_500_000_000]
     sim = Simulator(load_scene("damped_release"))
+    node = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("keys"))
+    node_keys = [key for key, _ in node.diagnostics().values]
     for timestamp, message, _ in diagnostics:
         sim.run(timestamp / 1e9 - sim.time)
         (status,) = message.status
@@ -135,6 +138,7 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
         assert values["energy_residual"] == f"{sim.residual():.3e}"
         assert values["refused_commands"] == "0"
         assert float(values["real_time_factor"]) > 0
+        assert list(values) == node_keys   # the node's diagnostics, key for key
 
 
 def test_run_bag_records_only_finite_values_and_reports_a_refused_step(capsys, tmp_path):
