@@ -44,8 +44,8 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "arm-sim = arm_sim_ros.cli:main",
-            "arm_sim_node = arm_sim_ros.node:main",
+            "arm-sim = arm_sim_ros.tools.cli:main",
+            "arm_sim_node = arm_sim_ros.node.main:main",
         ],
     },
 )

@@ -14,9 +14,9 @@ import threading
 import time
 from pathlib import Path
 
-from arm_sim_ros.bag import RunBag, steps_per_publish
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.tools.run_bag import RunBag, steps_per_publish
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 
 def offline_run(scene, seconds, recorder=None) -> float:
@@ -56,8 +56,8 @@ def record_throughput(messages: int, domain: int) -> tuple[float, int]:
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from arm_sim_ros import ros_messages as wire
-    from arm_sim_ros.record import DEFAULT_TOPICS, StopRequest, record
+    from arm_sim_ros.node import messages as wire
+    from arm_sim_ros.tools.record import DEFAULT_TOPICS, StopRequest, record
 
     publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
     listener = wire.make_participant(domain, wire.LOOPBACK_CONFIG)

@@ -14,8 +14,8 @@ import argparse
 import time
 from math import cos, sin
 
-from arm_sim_ros.scene import load_scene, preset_names
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics.scene import load_scene, preset_names
+from arm_sim_ros.physics.simulator import Simulator
 
 
 def explainer_step(h, gravity=9.81, damping=0.0, policy="zero", torque=(1, 0), frozen=(0, 0)):

@@ -17,8 +17,8 @@ import subprocess
 import sys
 import time
 
-from arm_sim_ros import node_core, ros_messages as msg
-from arm_sim_ros.transports.dds import DdsArmSimNode
+from arm_sim_ros.node import core as node_core, messages as msg
+from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
 DOMAIN = 39
 CONFIG = msg.loopback_config(f"arm_sim_bench_node_{os.getpid()}")  # meets only its own peers
@@ -26,7 +26,7 @@ SUBSCRIBER = """
 import sys, time
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from arm_sim_ros import ros_messages as msg
+from arm_sim_ros.node import messages as msg
 p = msg.make_participant({domain}, {config!r})
 r = DataReader(p, Topic(p, "rt/joint_states", msg.JointState), qos=msg.default_qos(msg.JointState))
 print("ready", flush=True)

@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from arm_sim_ros.batch import Batch
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
-from arm_sim_ros.study import reference, sample_times
+from arm_sim_ros.physics.batch import Batch
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.tools.accuracy import reference, sample_times
 
 AXIAL_INERTIA = 1e-9     # about the rod axis: physically ~0 for a thin rod, must be > 0
 

@@ -13,8 +13,8 @@ import math
 import random
 import time
 
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 CHECK_EVERY = 1000          # energy residual sampled every this many steps
 
@@ -60,8 +60,8 @@ def simulator_soak(scale: float) -> None:
 
 
 def node_soak(seconds: float) -> None:
-    from arm_sim_ros import ros_messages as msg
-    from arm_sim_ros.transports.dds import DdsArmSimNode
+    from arm_sim_ros.node import messages as msg
+    from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
     domain = 79
     node = DdsArmSimNode({"real_time_factor": 0.0, "damping": 0.5}, domain_id=domain,

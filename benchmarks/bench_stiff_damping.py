@@ -20,10 +20,10 @@ from math import ceil, log10
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from arm_sim_ros import model
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
-from arm_sim_ros.stability import SUBSTEP_FRACTION, stiffness, substepping
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stability import SUBSTEP_FRACTION, stiffness, substepping
 
 BASE = load_scene("damped_release")
 ARM = BASE.arm

@@ -35,9 +35,12 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from arm_sim_ros import cli, model, node_core, telemetry
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.tools import cli
+from arm_sim_ros.physics import model
+from arm_sim_ros.node import core as node_core, parameters
+from arm_sim_ros.recording import telemetry
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 STEP = 0.001
 
@@ -98,7 +101,7 @@ def node_loop(scene, steps, path, recorded, rate):
     if recorded:
         overrides["rerun_path"] = str(path)
     with Clocks() as clocks:
-        core = node_core.ArmSimCore(node_core.resolve_parameters(overrides), Quiet(),
+        core = node_core.ArmSimCore(parameters.resolve_parameters(overrides), Quiet(),
                                     wall_clock=lambda: 0.0, start_stamp_ns=0)
         tick = core.tick
         clocks.loop_started()

@@ -1,5 +1,5 @@
 """What the node should publish, from the core Simulator alone (shared by the transport tests)."""
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics.simulator import Simulator
 
 
 def expected_states(scene, schedule, steps_per_tick):

@@ -17,10 +17,12 @@ import pytest
 import yaml
 from rosbags.rosbag2 import Reader
 
-from arm_sim_ros import cli, node_core
-from arm_sim_ros.bag import NODE_TOPICS, TYPESTORE, BagWriter, joint_state
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.tools import cli
+from arm_sim_ros.node import core as node_core, parameters as node_params
+from arm_sim_ros.interface import NODE_TOPICS
+from arm_sim_ros.recording.bag import TYPESTORE, BagWriter, joint_state
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 INFINITE = {"sec": 9223372036, "nsec": 854775807}
 # Jazzy's metadata for a publisher with the ROS default profile, as `ros2 bag record` writes it.
@@ -127,7 +129,7 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
     diagnostics = messages["/diagnostics"]
     assert [t for t, _, _ in diagnostics] == [1_000_000_000, 2_000_000_000, 2_500_000_000]
     sim = Simulator(load_scene("damped_release"))
-    node = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("keys"))
+    node = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("keys"))
     node_keys = [key for key, _ in node.diagnostics().values]
     for timestamp, message, _ in diagnostics:
         sim.run(timestamp / 1e9 - sim.time)
@@ -187,7 +189,7 @@ def test_bag_writer_serialises_exactly_what_was_given(tmp_path):
 
 # --- arm-sim record on the dds transport ----------------------------------------------------
 
-wire = pytest.importorskip("arm_sim_ros.ros_messages")
+wire = pytest.importorskip("arm_sim_ros.node.messages")
 # Loopback only, and tagged with this process: a participant only discovers peers with the
 # same discovery tag, so a second run of this suite on the same domain ids cannot interfere.
 ISOLATED = wire.LOOPBACK_CONFIG.replace(
@@ -223,7 +225,7 @@ def start_recording(path, topics, participant):
     """Readers made on this thread (cyclonedds must not build a topic type on two threads at
     once), the recording loop on another; returns a function that stops it like Ctrl-C
     and returns the counts."""
-    from arm_sim_ros.record import StopRequest, TopicRecorder
+    from arm_sim_ros.tools.record import StopRequest, TopicRecorder
 
     writer = BagWriter(path)
     recorder = TopicRecorder(participant, topics, writer)
@@ -300,7 +302,7 @@ def test_record_writes_exactly_what_a_participant_published(tmp_path):
 
 
 def test_record_of_the_live_node_equals_the_core_with_the_same_commands(tmp_path):
-    from arm_sim_ros.transports.dds import DdsArmSimNode
+    from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
     domain = 50
     recorder = wire.make_participant(domain, ISOLATED)
@@ -343,7 +345,7 @@ def test_record_of_the_live_node_equals_the_core_with_the_same_commands(tmp_path
         assert topic["topic_metadata"]["offered_qos_profiles"] == [JAZZY_DEFAULT_OFFER]
 
 
-RECORD_MAIN = "import sys; from arm_sim_ros.cli import main; sys.exit(main(sys.argv[1:]))"
+RECORD_MAIN = "import sys; from arm_sim_ros.tools.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
 @pytest.mark.parametrize("domain, signum", [(48, signal.SIGINT), (49, signal.SIGTERM)])

@@ -2,10 +2,11 @@
 import numpy as np
 import pytest
 
-from arm_sim_ros import batch as batch_module, cli
-from arm_sim_ros.batch import Batch
-from arm_sim_ros.scene import SceneError, load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics import batch as batch_module
+from arm_sim_ros.tools import cli
+from arm_sim_ros.physics.batch import Batch
+from arm_sim_ros.physics.scene import SceneError, load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 RNG = np.random.default_rng(7)
 

@@ -6,9 +6,10 @@ import sys
 
 import pytest
 
-from arm_sim_ros import cli
-from arm_sim_ros.scene import load_scene, preset_names
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.tools import cli
+from arm_sim_ros.physics.scene import load_scene, preset_names
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.recording import csv_file
 
 PRESETS = {"release", "shoulder_torque_no_gravity", "gravity_compensation_at_rest",
            "moving_gravity_compensation", "moving_frozen_gravity", "damped_release",
@@ -67,7 +68,7 @@ def test_csv_has_initial_row_plus_one_per_step(capsys, tmp_path):
     code, _, _ = run_cli(capsys, "run", "--scene", "damped_release", "--csv", str(path))
     assert code == 0
     rows = list(csv.DictReader(path.open()))
-    assert list(rows[0]) == list(cli.CSV_COLUMNS)
+    assert list(rows[0]) == list(csv_file.CSV_COLUMNS)
     assert len(rows) == 201
     assert float(rows[0]["t"]) == 0.0 and float(rows[-1]["t"]) == 2.0
     last = rows[-1]
@@ -104,7 +105,7 @@ def test_bad_input_is_one_line_on_stderr_with_exit_code_2(capsys, argv, fragment
 
 
 def test_console_script_refuses_without_traceback():
-    proc = subprocess.run([sys.executable, "-m", "arm_sim_ros.cli", "run", "--set", "link_masses=-1,1"],
+    proc = subprocess.run([sys.executable, "-m", "arm_sim_ros.tools.cli", "run", "--set", "link_masses=-1,1"],
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr

@@ -3,10 +3,10 @@ import random
 
 import pytest
 
-from arm_sim_ros import dynamics, model
-from arm_sim_ros.integrators import RK4, compile_step
-from arm_sim_ros.scene import load_scene, preset_names
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics import dynamics, model
+from arm_sim_ros.physics.integrators import RK4, compile_step
+from arm_sim_ros.physics.scene import load_scene, preset_names
+from arm_sim_ros.physics.simulator import Simulator
 
 
 class CountingCos:

@@ -3,9 +3,9 @@ from math import pi
 
 import pytest
 
-from arm_sim_ros import model
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
 
 RODS = model.ArmParameters()
 GRAVITY = 9.81

@@ -7,11 +7,11 @@ from math import isnan, log
 
 import pytest
 
-from arm_sim_ros.integrators import (DOPRI5, EULER, INTEGRATORS, RK4, SEMI_IMPLICIT_EULER,
+from arm_sim_ros.physics.integrators import (DOPRI5, EULER, INTEGRATORS, RK4, SEMI_IMPLICIT_EULER,
                                      ButcherTableau, compile_step)
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
-from arm_sim_ros.study import reference
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.tools.accuracy import reference
 
 RELEASE = load_scene("release")
 FIXED_STEP_DOPRI5 = replace(DOPRI5, name="dopri5_fixed", embedded_b=None, embedded_order=0)

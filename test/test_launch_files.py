@@ -6,7 +6,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from arm_sim_ros.node_core import NODE_NAME, SPECS, resolve_parameters
+from arm_sim_ros.interface import NODE_NAME
+from arm_sim_ros.node.parameters import SPECS, resolve_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = ROOT / "config" / "arm_sim.yaml"

@@ -5,8 +5,8 @@ from math import cos, sin
 import numpy as np
 import pytest
 
-from arm_sim_ros import model
-from arm_sim_ros.model import ArmParameters, ParameterError
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.model import ArmParameters, ParameterError
 
 ARMS = [
     ArmParameters(),

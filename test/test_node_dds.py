@@ -18,9 +18,10 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_typestore
 
-from arm_sim_ros import node_core, ros_messages as msg, transports
-from arm_sim_ros.node import load_params_file, main as node_main, node_parameters, parse_ros_args
-from arm_sim_ros.transports.dds import DdsArmSimNode
+from arm_sim_ros import interface
+from arm_sim_ros.node import core as node_core, parameters as node_params, messages as msg, transports
+from arm_sim_ros.node.main import load_params_file, main as node_main, node_parameters, parse_ros_args
+from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from node_oracle import assert_matches, expected_states
 
 TIMEOUT = 5.0   # generous bound on loopback delivery; a passing test waits ~1 ms
@@ -116,7 +117,7 @@ def test_command_plus_gravity_compensation_matches_the_core():
     ([60.0, 0.0], "|tau1| = 60 N m exceeds torque_limit 50 N m"),
 ])
 def test_bad_command_is_refused_with_its_reason(bad, why):
-    core = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("t"))
+    core = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("t"))
     assert why in core.on_command(bad)
     assert core.refused_commands == 1 and core.command == (0.0, 0.0)
 
@@ -139,7 +140,7 @@ def test_bad_commands_over_dds_are_counted_and_the_last_good_command_holds(caplo
 
 def test_warnings_are_rate_limited_then_report_what_was_held_back(caplog):
     clock = FakeClock()
-    core = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("t"), clock)
+    core = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("t"), clock)
     with caplog.at_level(logging.WARNING):
         for _ in range(5):
             core.on_command([1.0])
@@ -167,7 +168,7 @@ def test_command_timeout_drops_torque_to_zero_with_one_warning(caplog):
 
 
 def test_zero_timeout_holds_a_command_forever():
-    core = node_core.ArmSimCore(node_core.resolve_parameters({"command_timeout": 0.0}),
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"command_timeout": 0.0}),
                                 logging.getLogger("t"))
     core.on_command([1.0, 1.0])
     for _ in range(500):  # 5 s, ten times the default timeout
@@ -193,19 +194,19 @@ def test_zero_timeout_holds_a_command_forever():
     ({"frame_rate": 5.0}, "frame_rate", "unknown parameter"),
 ])
 def test_bad_parameters_are_refused_with_a_reason(parameters, name, reason):
-    with pytest.raises(node_core.ParameterRefused) as refused:
+    with pytest.raises(node_params.ParameterRefused) as refused:
         DdsArmSimNode(parameters, domain_id=39, config=CONFIG)
     assert refused.value.name == name and reason in refused.value.reason
 
 
 def test_runtime_parameter_refusal_changes_nothing():
-    core = node_core.ArmSimCore(node_core.resolve_parameters({"damping": 0.5}), logging.getLogger("t"))
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 0.5}), logging.getLogger("t"))
     for _ in range(7):
         core.tick()
     before = (core.config, core.sim.state, core.sim.steps)
     for change in ({"damping": -2.0}, {"publish_rate": 7.0}, {"scene": "damped_release"},
                    {"joint_names": "elbow"}):
-        with pytest.raises(node_core.ParameterRefused):
+        with pytest.raises(node_params.ParameterRefused):
             core.set_parameters(change)
     assert (core.config, core.sim.state, core.sim.steps) == before
     assert core.set_parameters({"torque_limit": 10.0}) == ["torque_limit"]
@@ -215,7 +216,7 @@ def test_runtime_parameter_refusal_changes_nothing():
 
 
 def test_integer_rates_from_the_command_line_are_taken_as_doubles():
-    config = node_core.resolve_parameters({"publish_rate": 50, "step_size": 0.001})
+    config = node_params.resolve_parameters({"publish_rate": 50, "step_size": 0.001})
     assert config.values["publish_rate"] == 50.0 and config.steps_per_tick == 20
 
 
@@ -283,7 +284,7 @@ def test_non_finite_state_is_never_published():
     received = peer.read(peer.joint_states, 3, msg.JointState)
     for message in received:
         assert all(math.isfinite(v) for v in message.position + message.velocity + message.effort)
-    assert node.core.held and node.publish_diagnostics().level == node_core.ERROR
+    assert node.core.held and node.publish_diagnostics().level == interface.ERROR
     node.core.reset()
     assert not node.core.held
 
@@ -298,7 +299,7 @@ def test_free_running_spin_ticks_exactly_the_duration():
 
 
 def test_reset_restarts_the_scene_and_stamps_keep_increasing():
-    core = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("t"),
+    core = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("t"),
                                 start_stamp_ns=0)
     for _ in range(10):
         before = core.tick()
@@ -331,7 +332,7 @@ def test_ros_args_resolve_as_rclcpp_does_wildcards_in_order_then_the_node_own_va
 
 def test_params_file_of_the_package_is_accepted():
     path = os.path.join(os.path.dirname(__file__), "..", "config", "arm_sim.yaml")
-    node_core.resolve_parameters(load_params_file(path))
+    node_params.resolve_parameters(load_params_file(path))
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -367,7 +368,7 @@ def test_arm_sim_node_process_publishes_to_a_ros_peer_on_localhost(tmp_path):
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                CYCLONEDDS_URI=CONFIG)
     process = subprocess.Popen(
-        [sys.executable, "-m", "arm_sim_ros.node", "--transport", "dds", "--duration", "1.5",
+        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--duration", "1.5",
          "--ros-args", "-p", "publish_rate:=50", "-p", "scene:=damped_release"],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -410,7 +411,7 @@ class RecorderSpy:
 def test_recorder_sees_every_physics_step_and_the_events():
     spy = RecorderSpy()
     core = node_core.ArmSimCore(
-        node_core.resolve_parameters({"step_size": 0.002, "command_timeout": 0.02}),
+        node_params.resolve_parameters({"step_size": 0.002, "command_timeout": 0.02}),
         logging.getLogger("t"), recorder=spy)
     core.on_command([1.0, 0.0])
     core.on_command([math.nan, 0.0])
@@ -430,10 +431,10 @@ def test_recorder_sees_every_physics_step_and_the_events():
 
 
 def test_rerun_path_parameter_writes_a_recording_of_the_node(tmp_path):
-    pytest.importorskip("arm_sim_ros.telemetry")
+    pytest.importorskip("arm_sim_ros.recording.telemetry")
     rr = pytest.importorskip("rerun")
     path = tmp_path / "node.rrd"
-    core = node_core.ArmSimCore(node_core.resolve_parameters({"rerun_path": str(path)}),
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"rerun_path": str(path)}),
                                 logging.getLogger("t"))
     core.on_command([1.0])
     for _ in range(20):
@@ -448,7 +449,7 @@ def test_rerun_path_parameter_writes_a_recording_of_the_node(tmp_path):
 # --- arm-sim send-torque ------------------------------------------------------------------------
 
 def test_send_torque_publisher_drives_the_node():
-    from arm_sim_ros.send_torque import TorquePublisher
+    from arm_sim_ros.tools.send_torque import TorquePublisher
 
     node, _ = start(30, gravity=0.0)
     publisher = TorquePublisher(domain_id=30, config=CONFIG)
@@ -459,7 +460,7 @@ def test_send_torque_publisher_drives_the_node():
 
 
 def test_send_torque_command_line(monkeypatch, capsys):
-    from arm_sim_ros.cli import main as cli_main
+    from arm_sim_ros.tools.cli import main as cli_main
 
     monkeypatch.setenv("ROS_DOMAIN_ID", "31")      # nobody listens on this domain
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

@@ -8,7 +8,8 @@ import time
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from arm_sim_ros import node_core, ros_messages as msg
+from arm_sim_ros import interface
+from arm_sim_ros.node import core as node_core, parameters as node_params, messages as msg
 from node_oracle import expected_states
 from test_node_dds import TIMEOUT, FakeClock, start
 
@@ -55,12 +56,12 @@ def test_hostile_command_floods_over_dds_are_all_counted_and_never_reach_the_phy
         [tuple(e) for e in expected]
     status = node.publish_diagnostics()
     values = dict(status.values)
-    assert status.level == node_core.WARN and values["refused_commands"] == str(bad)
+    assert status.level == interface.WARN and values["refused_commands"] == str(bad)
 
 
 def test_a_command_flood_on_the_core_is_counted_and_logged_at_a_limited_rate(caplog):
     clock = FakeClock()
-    core = node_core.ArmSimCore(node_core.resolve_parameters({}), logging.getLogger("flood"), clock)
+    core = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("flood"), clock)
     core.on_command([0.5, 0.5])
     with caplog.at_level(logging.WARNING):
         for i in range(20_000):
@@ -82,12 +83,12 @@ def test_a_state_that_cannot_stay_finite_is_held_and_reported_over_dds():
     assert all(all_finite(m) for m in received)
     assert [list(m.velocity) for m in received] == [[1e300, -1e300]] * 3
     assert node.core.held and "holding the last finite state" in node.core.sim.fault
-    assert node.publish_diagnostics().level == node_core.ERROR
+    assert node.publish_diagnostics().level == interface.ERROR
 
 
 # --- parameter fuzzing -------------------------------------------------------------------------
 
-FUZZED = [s.name for s in node_core.PARAMETERS if not s.name.startswith("rerun_")]
+FUZZED = [s.name for s in node_params.PARAMETERS if not s.name.startswith("rerun_")]
 hostile_numbers = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0, -1.0, 1e308, -1e308,
                                    5e-324, 1e-300, 7.0, 1e4, 0.001, 0.05, 100.0, 1.5e6])
 hostile_values = st.one_of(
@@ -106,7 +107,7 @@ OF_KIND = {"float": plausible, "float_pair": st.lists(plausible, min_size=2, max
                                    "gravity_compensation", "base_link"])}
 parameter_changes = st.lists(
     st.sampled_from(FUZZED).flatmap(lambda name: st.tuples(st.just(name), st.one_of(
-        OF_KIND[node_core.SPECS[name].kind], hostile_values))),
+        OF_KIND[node_params.SPECS[name].kind], hostile_values))),
     min_size=1, max_size=2).map(dict)
 
 
@@ -114,15 +115,15 @@ parameter_changes = st.lists(
           suppress_health_check=[HealthCheck.too_slow])
 @given(changes=parameter_changes)
 def test_fuzzed_parameters_are_refused_with_nothing_changed_or_run_finite(changes):
-    core = node_core.ArmSimCore(node_core.resolve_parameters({"damping": 0.5}),
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 0.5}),
                                 logging.getLogger("fuzz"), FakeClock())
     for _ in range(3):
         core.tick()
     before = (core.config, core.sim.state, core.sim.steps, core.sim)
     try:
         core.set_parameters(changes)
-    except node_core.ParameterRefused as refused:
-        assert refused.name in node_core.SPECS and refused.reason
+    except node_params.ParameterRefused as refused:
+        assert refused.name in node_params.SPECS and refused.reason
         assert (core.config, core.sim.state, core.sim.steps, core.sim) == before
         assert all_finite(core.tick())
         return
@@ -132,13 +133,13 @@ def test_fuzzed_parameters_are_refused_with_nothing_changed_or_run_finite(change
     for _ in range(2):
         assert all_finite(core.tick())
     diagnostics = core.diagnostics()
-    assert diagnostics.level in (node_core.OK, node_core.WARN, node_core.ERROR)
-    assert (diagnostics.level == node_core.ERROR) == core.held
+    assert diagnostics.level in (interface.OK, interface.WARN, interface.ERROR)
+    assert (diagnostics.level == interface.ERROR) == core.held
 
 
 def test_diagnostics_report_substeps_for_stiff_damping():
     # d h Lambda = 200 x 0.01 x 15.09 is past RK4's limit 2.785: the guard sub-steps and says so.
-    core = node_core.ArmSimCore(node_core.resolve_parameters({"damping": 200.0, "step_size": 0.01}),
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 200.0, "step_size": 0.01}),
                                 logging.getLogger("stiff"), FakeClock())
     for _ in range(3):
         assert all_finite(core.tick())

@@ -23,8 +23,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from arm_sim_ros import node_core  # noqa: E402
-from arm_sim_ros.transports.rclpy_transport import ArmSimNode  # noqa: E402
+from arm_sim_ros.node import parameters as node_params  # noqa: E402
+from arm_sim_ros.node.transports.rclpy_transport import ArmSimNode  # noqa: E402
 from node_oracle import assert_matches, expected_states  # noqa: E402
 
 TIMEOUT = 5.0
@@ -153,7 +153,7 @@ def test_parameter_callback_refuses_bad_values_and_keeps_the_old_ones(ros):
 @pytest.mark.parametrize("ros", [25], indirect=True)
 def test_start_with_a_bad_parameter_is_refused(ros):
     make_node, _ = ros
-    with pytest.raises(node_core.ParameterRefused, match="publish_rate"):
+    with pytest.raises(node_params.ParameterRefused, match="publish_rate"):
         make_node(publish_rate=33.0)
 
 
@@ -188,7 +188,7 @@ def test_a_dds_transport_node_started_first_is_found_by_a_later_rclpy_peer(monke
     env = dict(os.environ, ROS_DOMAIN_ID="27", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                CYCLONEDDS_URI=DISCOVERY_TAG)
     process = subprocess.Popen(
-        [sys.executable, "-m", "arm_sim_ros.node", "--transport", "dds", "--duration", "60",
+        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--duration", "60",
          "--quiet", "--ros-args", "-p", "gravity:=0.0"],
         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:

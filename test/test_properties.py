@@ -11,10 +11,10 @@ import math
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from arm_sim_ros import model
-from arm_sim_ros.scene import Scene, SceneError
-from arm_sim_ros.simulator import Simulator
-from arm_sim_ros.stability import worst_stiffness
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.scene import Scene, SceneError
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stability import worst_stiffness
 
 SETTINGS = settings(max_examples=60, deadline=None, derandomize=True)
 SUBSTEP_BUDGET = 6000          # RK4 sub-steps per example

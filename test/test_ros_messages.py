@@ -8,7 +8,7 @@ from cyclonedds.idl import IdlStruct
 from hypothesis import given, settings, strategies as st
 from rosbags.typesys import Stores, get_typestore
 
-from arm_sim_ros import ros_messages as m
+from arm_sim_ros.node import messages as m
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 T = STORE.types

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from arm_sim_ros import model
-from arm_sim_ros.integrators import RK4, ButcherTableau, compile_step
-from arm_sim_ros.scene import Scene, load_scene
-from arm_sim_ros.simulator import Simulator
-from arm_sim_ros.stability import (RK4_REAL_LIMIT, SUBSTEP_FRACTION, real_stability_limit,
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.integrators import RK4, ButcherTableau, compile_step
+from arm_sim_ros.physics.scene import Scene, load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stability import (RK4_REAL_LIMIT, SUBSTEP_FRACTION, real_stability_limit,
                                    stability_polynomial, stiffness, worst_stiffness)
 
 DAMPED = load_scene("damped_release")
@@ -273,7 +273,7 @@ def test_damped_release_is_passive_over_the_whole_range(damping, h):
 
 
 def test_arm_sim_run_says_when_it_sub_stepped_or_held(capsys):
-    from arm_sim_ros.cli import main
+    from arm_sim_ros.tools.cli import main
 
     assert main(["run", "--scene", "damped_release", "--set", "damping=1e4", "--duration", "0.1"]) == 0
     assert "arm-sim: substepping at t = 0 s" in capsys.readouterr().err

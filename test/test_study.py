@@ -5,8 +5,8 @@ from math import isinf
 
 import pytest
 
-from arm_sim_ros import cli, study
-from arm_sim_ros.scene import load_scene
+from arm_sim_ros.tools import cli, accuracy as study
+from arm_sim_ros.physics.scene import load_scene
 
 
 def printed(values):

@@ -15,9 +15,12 @@ import pyarrow as pa
 import pytest
 import rerun as rr
 
-from arm_sim_ros import cli, model, telemetry
-from arm_sim_ros.scene import load_scene
-from arm_sim_ros.simulator import Simulator
+from arm_sim_ros.tools import cli
+from arm_sim_ros.physics import model
+from arm_sim_ros.recording import telemetry
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.node import parameters as node_params
 
 TOL = 1e-12
 ALL_CHANNELS = {"energy/kinetic", "energy/potential", "energy/total", "energy/dissipated",
@@ -448,9 +451,9 @@ def run_node(node_core, config, ticks, command=None):
 
 
 def test_the_node_writes_a_recording_in_process(tmp_path):
-    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "node.rrd"
-    config = node_core.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
+    config = node_params.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
                                            "publish_rate": 50.0})
     log, samples, columns = run_node(node_core, config, ticks=25)
     assert_equals_core(columns, samples)
@@ -462,9 +465,9 @@ def test_the_node_writes_a_recording_in_process(tmp_path):
 def test_the_node_records_each_ticks_command_with_its_steps(tmp_path):
     """The node hands over a tick's states at once (step_batch); a command taken between
     ticks holds for the next tick's steps, as in the core."""
-    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "commanded.rrd"
-    config = node_core.resolve_parameters({
+    config = node_params.resolve_parameters({
         "scene": "release", "policy": "command_gravity_compensation", "damping": 0.2,
         "rerun_path": str(path), "publish_rate": 20.0, "command_timeout": 0.0})
     _, samples, columns = run_node(node_core, config, ticks=12,
@@ -517,9 +520,9 @@ def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_orde
     """The node collects steps over ticks (RECORD_EVERY) before handing them over; an event,
     a new command, a reset and a hold each hand over what was collected first, so every
     row, command and text line lands at its own step."""
-    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "ticks.rrd"
-    config = node_core.resolve_parameters({"scene": "release", "rerun_path": str(path),
+    config = node_params.resolve_parameters({"scene": "release", "rerun_path": str(path),
                                            "command_timeout": 0.0})
     assert config.steps_per_tick == 1
     core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
@@ -556,9 +559,9 @@ def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_orde
 
 
 def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
-    node_core = pytest.importorskip("arm_sim_ros.node_core")
+    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "held.rrd"
-    config = node_core.resolve_parameters({"scene": "release", "rerun_path": str(path),
+    config = node_params.resolve_parameters({"scene": "release", "rerun_path": str(path),
                                            "initial_velocities": [1e200, 1e200]})
     core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=0)
     for _ in range(4):

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from arm_sim_ros.model import ArmParameters
-from arm_sim_ros.node_core import SPECS
+from arm_sim_ros.physics.model import ArmParameters
+from arm_sim_ros.node.parameters import SPECS
 
 URDF = Path(__file__).resolve().parents[1] / "urdf" / "two_link_arm.urdf"
 ARM = ArmParameters()

@@ -7,48 +7,21 @@ the functions that need them, so `arm-sim scenes` starts fast.
 """
 from __future__ import annotations
 
-import argparse
-import csv
 import importlib
 import json
 import sys
 
-from .model import ParameterError
-from .scene import Scene, SceneError, load_scene, parse_value, preset_names
+from ..physics.model import ParameterError
+from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
+from ..recording.csv_file import CsvRecorder
+from ..usage import ArgumentParser, UsageError
+from .arguments import add_scene_arguments, scene_from_args
 
 # Modules that contribute subcommands of their own (each defines add_parser).
-SUBCOMMAND_MODULES = ["arm_sim_ros.study",        # accuracy
-                      "arm_sim_ros.batch",        # batch
-                      "arm_sim_ros.record",       # record
-                      "arm_sim_ros.send_torque"]  # send-torque
-
-CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
-               "work", "dissipated", "residual")
-
-
-class UsageError(Exception):
-    """Bad input on the command line; printed as one line, exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(message)
-
-
-def scene_from_args(args) -> Scene:
-    """The scene named by --scene, with --step and --set applied (shared by subcommands)."""
-    scene = load_scene(args.scene)
-    if getattr(args, "step", None) is not None:
-        scene = scene.replace(step_size=parse_value("step_size", args.step))
-    return scene.with_text_overrides(getattr(args, "set", None) or [])
-
-
-def add_scene_arguments(parser) -> None:
-    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`)")
-    parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
-    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="override a scene key, e.g. gravity=0 or constant_torque=1,0")
-
+SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
+                      "arm_sim_ros.tools.batch",        # batch
+                      "arm_sim_ros.tools.record",       # record
+                      "arm_sim_ros.tools.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:
     for name in preset_names():
@@ -56,36 +29,12 @@ def cmd_scenes(args) -> int:
     return 0
 
 
-class CsvRecorder:
-    """One row per step plus the initial row."""
-
-    def __init__(self, path: str):
-        self.path = path
-
-    def start(self, sim) -> None:
-        try:
-            self._file = open(self.path, "w", newline="")
-        except OSError as error:
-            raise UsageError(f"cannot write --csv {self.path}: {error.strerror}") from None
-        self._writer = csv.writer(self._file)
-        self._writer.writerow(CSV_COLUMNS)
-        self.step(sim)
-
-    def step(self, sim) -> None:
-        s = sim.sample()
-        self._writer.writerow([repr(v) for v in (s.t, *s.q, *s.qd, *s.tau, s.kinetic, s.potential,
-                                                 s.total, s.work, s.dissipated, s.residual)])
-
-    def finish(self, sim) -> None:
-        self._file.close()
-
-
 # Hooks other modules extend: each takes (args) and returns a recorder or None.
 RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None,
-                 lambda args: importlib.import_module("arm_sim_ros.bag").run_recorder(args)
+                 lambda args: importlib.import_module("arm_sim_ros.tools.run_bag").run_recorder(args)
                  if args.bag else None,
-                 lambda args: importlib.import_module("arm_sim_ros.telemetry").run_recorder(args)
-                 if args.rerun or args.rerun_spawn or args.rerun_connect else None]
+                 lambda args: importlib.import_module("arm_sim_ros.recording.telemetry").make_recorder(
+                     path=args.rerun, spawn=args.rerun_spawn, connect=args.rerun_connect)]
 
 
 RUN_BATCH_STEPS = 1000   # steps whose states a recorder with step_batch gets in one call
@@ -120,7 +69,7 @@ def run_recorded(sim, duration: float, recorders) -> float:
 
 
 def cmd_run(args) -> int:
-    from .simulator import Simulator
+    from ..physics.simulator import Simulator
 
     scene = scene_from_args(args)
     duration = scene.duration if args.duration is None else parse_value("duration", args.duration)
@@ -162,9 +111,9 @@ def format_result(scene: Scene, r: dict) -> str:
     ])
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="arm-sim", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="arm-sim", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=ArgumentParser)
     sub.add_parser("scenes", help="list the preset scenes").set_defaults(func=cmd_scenes)
     run = sub.add_parser("run", help="run a scene offline and print the final state and energy")
     add_scene_arguments(run)

@@ -17,10 +17,12 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from .. import ros_messages as msg
-from ..node_core import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
-                         ArmSimCore, DiagnosticData, JointStateData, resolve_parameters,
-                         split_stamp)
+from .. import messages as msg
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
+                          split_stamp)
+from ..core import ArmSimCore
+from ..diagnostics import DiagnosticData, JointStateData
+from ..parameters import resolve_parameters
 
 CATCH_UP = 0.05   # wall seconds of lag made up by ticking back to back (scheduler jitter)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import signal
 import time
+from ..usage import UsageError
 
 DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
                   "/joint_torque_commands": "std_msgs/msg/Float64MultiArray",
@@ -28,7 +29,6 @@ FLUSH_SECONDS = 2.0  # ... and this bounds the wait when publishers keep going
 
 def parse_topic(text: str) -> tuple[str, str]:
     """`name:type`, type as `sensor_msgs/msg/JointState` or just `JointState`."""
-    from .cli import UsageError
 
     name, sep, short = text.rpartition(":")
     matches = [t for t in EXTRA_TYPES if short in (t, t.rsplit("/", 1)[-1])]
@@ -52,7 +52,7 @@ class TopicRecorder:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from . import ros_messages as wire
+        from ..node import messages as wire
 
         self.writer = writer
         self.topics = topics
@@ -112,13 +112,13 @@ class TopicRecorder:
                 return
 
     def _message(self, name, sample):
-        from .bag import message_from
+        from ..recording.bag import message_from
 
         return message_from(self.topics[name], sample)
 
     def _add(self, name: str) -> None:
-        from .bag import NODE_QOS
-        from .ros_messages import ros_topic
+        from ..recording.bag import NODE_QOS
+        from ..node.messages import ros_topic
 
         for endpoint in self._publications.take(N=10_000):
             self._offers.setdefault(endpoint.topic_name, {})[endpoint.key] = endpoint.qos
@@ -131,7 +131,7 @@ def offer_from_dds(qos):
     from cyclonedds.core import dds_infinity
     from cyclonedds.qos import Policy
 
-    from .bag import INFINITE, QosLiveliness, QosTime, offered_qos
+    from ..recording.bag import INFINITE, QosLiveliness, QosTime, offered_qos
 
     def duration(policy, attribute):  # an absent policy means infinite, as in DDS
         ns = dds_infinity if policy is None else getattr(policy, attribute)
@@ -165,7 +165,7 @@ class StopRequest:
 def record(path, topics: dict[str, str], participant, duration: float | None = None,
            stop=None) -> dict[str, int]:
     """Record until `stop.requested` or `duration` wall seconds; returns messages per topic."""
-    from .bag import BagWriter
+    from ..recording.bag import BagWriter
 
     with BagWriter(path) as writer:
         TopicRecorder(participant, topics, writer).run(stop or StopRequest(), duration)
@@ -176,8 +176,8 @@ def cmd_record(args) -> int:
     import sys
     from pathlib import Path
 
-    from .bag import BagError
-    from .ros_messages import DiscoveryError, make_participant
+    from ..recording.bag import BagError
+    from ..node.messages import DiscoveryError, make_participant
 
     topics = dict(DEFAULT_TOPICS)
     topics.update(parse_topic(t) for text in args.topics or [] for t in text.split(",") if t)

@@ -548,13 +548,8 @@ def make_recorder(scene=None, path=None, spawn=False, connect=None, application_
     """A recorder writing to `path` (.rrd), a spawned viewer and/or a running viewer at
     `connect`; None when no sink is asked for. The recording is named after `scene`
     (default: the first simulator's); `warn` receives the one-line warnings (default:
-    the `arm_sim_ros.telemetry` logger)."""
+    the `arm_sim_ros.recording.telemetry` logger)."""
     if not (path or spawn or connect):
         return None
     return RerunRecorder(scene, path=path, spawn=spawn, connect=connect,
                          application_id=application_id, warn=warn)
-
-
-def run_recorder(args) -> RerunRecorder | None:
-    """`arm-sim run --rerun PATH / --rerun-spawn / --rerun-connect ADDR`."""
-    return make_recorder(path=args.rerun, spawn=args.rerun_spawn, connect=args.rerun_connect)

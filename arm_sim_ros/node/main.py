@@ -19,19 +19,12 @@ import time
 import yaml
 
 from . import transports
-from .node_core import NODE_NAME, ParameterRefused
+from ..interface import NODE_NAME
+from ..usage import ArgumentParser, UsageError
+from .parameters import ParameterRefused
 
 LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warn": logging.WARNING,
           "warning": logging.WARNING, "error": logging.ERROR, "fatal": logging.CRITICAL}
-
-
-class UsageError(Exception):
-    """Bad command line; one line on stderr, exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(message)
 
 
 def split_ros_args(argv: list) -> tuple[list, list]:
@@ -175,7 +168,7 @@ class _RosFormatter(logging.Formatter):
 
 
 def run_dds(ros_argv: list, duration: float | None, status) -> int:
-    from .ros_messages import DiscoveryError
+    from .messages import DiscoveryError
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
@@ -195,7 +188,7 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="arm_sim_node", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="arm_sim_node", description=__doc__.splitlines()[0])
     parser.add_argument("--transport", default="auto", choices=("auto",) + transports.TRANSPORTS,
                         help="rclpy when it imports (auto), else dds")
     parser.add_argument("--duration", type=float, metavar="SECONDS",

@@ -18,9 +18,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ..node_core import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
-                         PARAMETERS, SPECS, ArmSimCore, DiagnosticData, JointStateData,
-                         ParameterRefused, resolve_parameters, scene_defaults, split_stamp)
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
+                          split_stamp)
+from ..core import ArmSimCore
+from ..diagnostics import DiagnosticData, JointStateData
+from ..parameters import PARAMETERS, SPECS, ParameterRefused, resolve_parameters, scene_defaults
 
 
 def _stamp(stamp_ns: int) -> Time:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from math import isfinite
+from ..usage import UsageError
 
 
 def add_parser(subparsers) -> None:
@@ -25,8 +26,6 @@ def add_parser(subparsers) -> None:
 
 
 def cmd_send_torque(args) -> int:
-    from .cli import UsageError
-
     for name, value in (("--rate", args.rate), ("--wait", args.wait)):
         if not (isfinite(value) and value > 0):
             raise UsageError(f"{name} {value} must be a positive number")
@@ -56,7 +55,7 @@ class TorquePublisher:
         from cyclonedds.pub import DataWriter
         from cyclonedds.topic import Topic
 
-        from . import ros_messages as msg
+        from ..node import messages as msg
 
         self._msg = msg
         self.participant = msg.make_participant(domain_id, config)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from math import isfinite
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,6 +19,7 @@ from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, compile_step
 from .model import ArmParameters
 from .scene import Scene, SceneError
+from .simulator import Simulator
 
 CHUNK = 32768                 # arms per chunk: a few hundred KB per array, stays in L2
 PAIR_PARAMETERS = ("link_lengths", "link_masses", "com_distances", "com_inertias",
@@ -195,8 +195,6 @@ def _coefficients(v: dict) -> dict:
 def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0) -> dict:
     """Arms around the scene's initial pose (uniform +-0.5 rad), timed; with a spot check of
     three arms against the single-arm simulator."""
-    from .simulator import Simulator
-
     rng = np.random.default_rng(seed)
     positions = np.asarray(scene.initial_positions) + rng.uniform(-0.5, 0.5, (count, 2))
     batch = Batch(scene, positions, count=count)
@@ -214,34 +212,3 @@ def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int
     return {"arms": count, "steps": steps, "threads": threads, "seconds": elapsed,
             "arm_steps_per_s": count * steps / elapsed, "non_finite_arms": int((~finite).sum()),
             "max_diff_vs_single_arm": worst}
-
-
-def cmd_batch(args) -> int:
-    from .cli import UsageError, scene_from_args
-
-    scene = scene_from_args(args)
-    if args.count < 1 or args.threads < 1:
-        raise UsageError("--count and --threads must be at least 1")
-    if not (isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration {args.duration:g} must be a positive number of seconds")
-    steps = scene.steps_for(args.duration)
-    r = throughput(scene, args.count, steps, args.threads, args.seed)
-    print(f"scene {scene.name}: {r['arms']} arms x {r['steps']} RK4 steps of {scene.step_size:g} s "
-          f"on {r['threads']} thread(s) in {r['seconds']:.3f} s wall")
-    print(f"throughput {r['arm_steps_per_s'] / 1e6:.2f} M arm-steps/s; "
-          f"non-finite arms {r['non_finite_arms']}; "
-          f"max |batch - single-arm RK4| on 3 arms {r['max_diff_vs_single_arm']:.1e}")
-    return 0
-
-
-def add_parser(subparsers) -> None:
-    from .cli import add_scene_arguments
-
-    p = subparsers.add_parser("batch", help="simulate many arms at once (numpy RK4) and report "
-                                            "throughput")
-    add_scene_arguments(p)
-    p.add_argument("--count", type=int, default=100_000, help="number of arms (default 100000)")
-    p.add_argument("--duration", type=float, default=0.5, help="simulated seconds (default 0.5)")
-    p.add_argument("--threads", type=int, default=1, help="threads stepping chunks (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the initial-pose spread")
-    p.set_defaults(func=cmd_batch)

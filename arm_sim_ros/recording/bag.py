@@ -8,14 +8,12 @@ offered, written as Jazzy writes what the ROS graph reports for a publisher: the
 policies that matter for matching, with history "unknown" and depth 0 (DDS discovery
 does not carry them) and infinite durations as {sec: 9223372036, nsec: 854775807}.
 
-`arm-sim run ... --bag DIR` records an offline run here (`RunBag`); the dds recorder,
-`arm-sim record`, lives in `record.py` and writes through the same `BagWriter`.
+`arm-sim run ... --bag DIR` (tools/run_bag.py) and the dds recorder `arm-sim record`
+(tools/record.py) both write through `BagWriter`.
 """
 from __future__ import annotations
 
-from math import ceil, isfinite
 from pathlib import Path
-from time import perf_counter
 
 import numpy as np
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
@@ -23,20 +21,13 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, Q
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
-from .cli import UsageError, scene_from_args
-from .node_core import (ERROR, NODE_NAME, OK, SPECS, ParameterRefused, _steps_per_tick,
-                        diagnostic_values, split_stamp)
+from ..interface import (DIAGNOSTIC_ARRAY, FLOAT64_MULTI_ARRAY, JOINT_NAMES, JOINT_STATE, NODE_NAME,
+                         OK, split_stamp)
+from ..usage import UsageError
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 BAG_VERSION = 9  # the rosbag2 metadata version Jazzy writes
 
-JOINT_STATE = "sensor_msgs/msg/JointState"
-FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
-NODE_TOPICS = {"/joint_states": JOINT_STATE,
-               "/joint_torque_commands": FLOAT64_MULTI_ARRAY,
-               "/diagnostics": DIAGNOSTIC_ARRAY}
-DIAGNOSTICS_PERIOD = 1.0  # s of simulated time, as the node's 1 Hz diagnostics timer
 
 # rmw's RMW_DURATION_INFINITE as rosbag2 writes it.
 INFINITE = QosTime(9223372036, 854775807)
@@ -76,8 +67,8 @@ def header(nanoseconds: int, frame_id: str = ""):
     return _msg("std_msgs/msg/Header")(stamp=stamp(nanoseconds), frame_id=frame_id)
 
 
-def joint_state(nanoseconds: int, q, qd, tau, names=SPECS["joint_names"].default,
-                frame_id: str = SPECS["frame_id"].default):
+def joint_state(nanoseconds: int, q, qd, tau, names=JOINT_NAMES,
+                frame_id: str = ""):
     """JointState as the node publishes it: effort is the applied torque."""
     return _msg(JOINT_STATE)(header=header(nanoseconds, frame_id), name=list(names),
                              position=np.array(q, dtype=np.float64),
@@ -175,94 +166,3 @@ class BagWriter:
     def __exit__(self, *exc):
         self.close()
         return False
-
-
-# --- `arm-sim run --bag DIR` ---------------------------------------------------------------
-
-def steps_per_publish(step_size: float, publish_rate: float) -> int:
-    """Integration steps between two publications, by the node's own rule: a rate whose
-    period is not a whole number of steps is refused (stamps must stay simulated time)."""
-    if not (isfinite(publish_rate) and publish_rate > 0):
-        raise BagError(f"--publish-rate {publish_rate} must be a positive number of Hz")
-    try:
-        return _steps_per_tick(publish_rate, step_size)
-    except ParameterRefused as error:
-        raise BagError(f"--publish-rate {error.reason}") from None
-
-
-def nanoseconds(sim) -> int:
-    """Simulated time in ns, from the step count (never an accumulated float)."""
-    return round(sim.steps * sim.step_size * 1e9)
-
-
-# Policies whose torque is a command: what the offline run applied is recorded as one.
-APPLIED_COMMAND_POLICIES = ("constant", "command", "command_gravity_compensation")
-
-
-class RunBag:
-    """A recorder for `arm-sim run`: JointState every publish period (stamped with
-    simulated time, the bag's clock too), the applied command alongside it when the
-    policy takes commands, and diagnostics every simulated second (and at the end)."""
-
-    def __init__(self, path, publish_steps: int):
-        self.path = path
-        self.publish_steps = publish_steps
-
-    def start(self, sim) -> None:
-        self.writer = BagWriter(self.path)
-        self.commands = sim.scene.policy in APPLIED_COMMAND_POLICIES
-        for topic, msgtype in NODE_TOPICS.items():
-            if self.commands or topic != "/joint_torque_commands":
-                self.writer.add_topic(topic, msgtype)
-        self.diagnostics_steps = ceil(DIAGNOSTICS_PERIOD / sim.step_size - 1e-9)
-        self.last_diagnostics = 0
-        self.max_abs_residual = 0.0
-        self.wall_start = perf_counter()
-        self.publish(sim)
-
-    def step(self, sim) -> None:
-        if sim.steps % self.publish_steps == 0:
-            self.publish(sim)
-        if sim.steps - self.last_diagnostics >= self.diagnostics_steps:
-            self.diagnose(sim)
-
-    def finish(self, sim) -> None:
-        try:
-            if sim.steps != self.last_diagnostics:
-                self.diagnose(sim)
-        finally:
-            self.writer.close()
-
-    def publish(self, sim) -> None:
-        s, t = sim.sample(), nanoseconds(sim)
-        if not sim.holding:  # the largest |residual| at a tick, as the node keeps it
-            self.max_abs_residual = max(self.max_abs_residual, abs(s.residual))
-        self.writer.write("/joint_states", t, joint_state(t, s.q, s.qd, s.tau))
-        if self.commands:
-            self.writer.write("/joint_torque_commands", t, torque_command(applied_command(sim)))
-
-    def diagnose(self, sim) -> None:
-        """The node's diagnostics, same keys; an offline run refuses and misses nothing."""
-        t, wall = nanoseconds(sim), perf_counter() - self.wall_start
-        command = applied_command(sim) if self.commands else (0.0, 0.0)
-        # A refused (non-finite) step leaves the last finite state in place, as in the node.
-        level, message = (ERROR, sim.fault) if sim.holding else (OK, "running")
-        values = diagnostic_values(sim, f"{sim.time / wall:.3f}" if wall > 0 else "inf",
-                                   self.max_abs_residual, sim.holding, command, self.publish_steps)
-        self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=values))
-        self.last_diagnostics = sim.steps
-
-
-def applied_command(sim):
-    """The command part of the torque: the constant torque, or the held command."""
-    scene = sim.scene
-    return scene.constant_torque if scene.policy == "constant" else tuple(sim.dynamics.command)
-
-
-def run_recorder(args):
-    """RUN_RECORDERS hook: a RunBag for `--bag DIR`, refused before the run if the rate
-    does not divide the step or DIR exists."""
-    steps = steps_per_publish(scene_from_args(args).step_size, args.publish_rate)
-    if Path(args.bag).exists():
-        raise BagError(f"--bag {args.bag} exists already; a recording never overwrites one")
-    return RunBag(args.bag, steps)

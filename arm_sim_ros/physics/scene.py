@@ -150,9 +150,9 @@ def parse_value(key: str, text: str):
 
 def scene_dirs() -> list[Path]:
     """Where presets live: the source tree, then where pip or colcon install data_files."""
-    here = Path(__file__).resolve().parent
+    source_tree = Path(__file__).resolve().parents[2]
     candidates = [Path(os.environ["ARM_SIM_SCENES"])] if os.environ.get("ARM_SIM_SCENES") else []
-    candidates += [here.parent / "config" / "scenes",
+    candidates += [source_tree / "config" / "scenes",
                    Path(sys.prefix) / "share" / "arm_sim_ros" / "config" / "scenes"]
     try:  # a colcon install puts them in the package's share directory
         from ament_index_python.packages import get_package_share_directory

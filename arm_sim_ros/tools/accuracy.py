@@ -16,10 +16,12 @@ import time
 from dataclasses import asdict, dataclass
 from math import isfinite, log
 
-from . import model
-from .integrators import INTEGRATORS, compile_step
-from .scene import Scene, SceneError
-from .simulator import Simulator
+from ..physics import model
+from ..physics.integrators import INTEGRATORS, compile_step
+from ..physics.scene import Scene, SceneError
+from ..physics.simulator import Simulator
+from ..usage import UsageError
+from .arguments import add_scene_arguments, scene_from_args
 
 REFERENCE_TOLERANCE = 1e-13
 DEFAULT_STEPS = (0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125, 0.00015625)
@@ -249,8 +251,6 @@ def _positive_list(values, what: str, above: float = 0.0, below: float | None = 
 
 
 def cmd_accuracy(args) -> int:
-    from .cli import UsageError, scene_from_args
-
     scene = scene_from_args(args)
     unknown = [n for n in args.integrators if n not in INTEGRATORS]
     if unknown:
@@ -278,8 +278,6 @@ def cmd_accuracy(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    from .cli import add_scene_arguments
-
     p = subparsers.add_parser("accuracy", help="work-precision study: error, drift and CPU cost "
                                                "of every integrator against a DOP853 reference")
     add_scene_arguments(p)

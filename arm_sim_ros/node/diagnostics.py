@@ -1,0 +1,50 @@
+"""What the node publishes, transport-neutral: JointState and diagnostics as plain data.
+
+The diagnostic keys are one list, used by the node and by `arm-sim run --bag`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class JointStateData:
+    stamp_ns: int
+    frame_id: str
+    name: list
+    position: list
+    velocity: list
+    effort: list
+
+
+@dataclass(frozen=True)
+class DiagnosticData:
+    stamp_ns: int
+    level: int
+    name: str
+    message: str
+    hardware_id: str
+    values: list           # [(key, value text)]
+
+
+COUNTERS = ("received_commands", "refused_commands", "late_ticks", "command_timeouts")
+
+
+def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held: bool,
+                      command, steps_per_tick: int, counters=None) -> list:
+    """The (key, text) pairs of the simulation's DiagnosticStatus: the node's, and those an
+    offline `arm-sim run --bag` writes (its counters stay 0)."""
+    counters = counters or {}
+    return [
+        ("scene", sim.scene.name), ("policy", sim.scene.policy),
+        ("sim_time", f"{sim.time:.6f}"), ("real_time_factor", real_time_factor),
+        ("energy_residual", "held" if held else f"{sim.residual():.3e}"),
+        ("max_abs_energy_residual", f"{max_abs_residual:.3e}"),
+        *((name, str(counters.get(name, 0))) for name in COUNTERS),
+        ("command", f"{command[0]:g} {command[1]:g}"),
+        ("steps_per_tick", str(steps_per_tick)),
+        # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.
+        ("substeps_per_step", str(sim.substeps)),
+        ("substeps_taken", str(sim.substeps_taken)),
+        ("refused_steps", str(sim.refused_steps)),
+    ]

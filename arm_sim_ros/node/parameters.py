@@ -1,0 +1,212 @@
+"""The node's parameters, declared in one place: name, kind, default, unit and meaning.
+
+`resolve_parameters` turns overrides into a validated `NodeConfig`; a value the simulation
+cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..interface import JOINT_NAMES
+from ..physics.model import ParameterError
+from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
+
+MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
+
+
+class ParameterRefused(ValueError):
+    """A parameter value the node will not take; str() names the parameter and the reason."""
+
+    def __init__(self, name: str, reason: str):
+        super().__init__(f"parameter {name!r} refused: {reason}")
+        self.name, self.reason = name, reason
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    name: str
+    kind: str              # "str", "float", "bool", "float_pair", "str_list"
+    default: object        # a value, or a function scene -> value for scene-derived defaults
+    description: str
+    scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
+
+    def default_for(self, scene: Scene):
+        return self.default(scene) if callable(self.default) else self.default
+
+
+def _from_scene(name):
+    return lambda scene: list(v) if isinstance(v := getattr(scene, name), tuple) else v
+
+
+def _node_policy(scene: Scene) -> str:
+    # An unpowered scene and a command policy that has not yet heard a command apply the
+    # same zero torque; serving "zero" as "command" lets the node listen out of the box.
+    return "command" if scene.policy == "zero" else scene.policy
+
+
+def _scene_spec(name, kind, description, default=None):
+    return ParameterSpec(name, kind, default or _from_scene(name), description, scene_field=True)
+
+
+# Every parameter of the node, in one place. Scene-derived defaults come from `scene`.
+PARAMETERS = (
+    ParameterSpec("scene", "str", "release", "preset scene (config/scenes); chosen at start"),
+    _scene_spec("policy", "str", "torque policy: command, command_gravity_compensation, zero, "
+                "constant, gravity_compensation, frozen_gravity", _node_policy),
+    _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
+    _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
+    _scene_spec("damping", "float", "joint damping d, N m s/rad (0 = off)"),
+    _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
+    _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
+    _scene_spec("link_lengths", "float_pair", "[l1, l2] m"),
+    _scene_spec("link_masses", "float_pair", "[m1, m2] kg"),
+    _scene_spec("com_distances", "float_pair", "[r1, r2] m, joint to centre of mass"),
+    _scene_spec("com_inertias", "float_pair", "[I1, I2] kg m^2 about each centre of mass"),
+    _scene_spec("integrator", "str", "Runge-Kutta method (rk4 default)"),
+    _scene_spec("rtol", "float", "relative error tolerance of integrator dopri5"),
+    _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
+    _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
+    ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
+                  "publishes joint_states"),
+    ParameterSpec("real_time_factor", "float", 1.0, "simulated seconds per wall second "
+                  "(0 = as fast as possible)"),
+    ParameterSpec("command_timeout", "float", 0.5, "s of simulated time without a command "
+                  "before torque drops to zero (0 = hold forever)"),
+    ParameterSpec("torque_limit", "float", 50.0, "commands with |tau| above this (N m) are refused"),
+    ParameterSpec("joint_names", "str_list", list(JOINT_NAMES),
+                  "names published in joint_states (match the URDF)"),
+    ParameterSpec("frame_id", "str", "", "header.frame_id of joint_states"),
+    ParameterSpec("rerun_path", "str", "", "write a Rerun recording here (\"\" = off)"),
+    ParameterSpec("rerun_spawn", "bool", False, "spawn a Rerun viewer"),
+    ParameterSpec("rerun_connect", "str", "", "stream to a Rerun viewer at this address (\"\" = off)"),
+)
+SPECS = {spec.name: spec for spec in PARAMETERS}
+SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
+SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair"}   # node kind -> scene kind
+
+
+def coerce(spec: ParameterSpec, value):
+    """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
+    checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
+    kind, name = spec.kind, spec.name
+    if kind in SCENE_KINDS:
+        try:
+            value = coerce_value(name, SCENE_KINDS[kind], value)
+        except SceneError as error:
+            raise ParameterRefused(name, str(error)) from None
+        return list(value) if kind == "float_pair" else value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise ParameterRefused(name, f"must be true or false, got {value!r}")
+        return value
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise ParameterRefused(name, f"must be a list, got {value!r}")
+    if not all(isinstance(v, str) for v in value):
+        raise ParameterRefused(name, f"must be a list of text, got {list(value)!r}")
+    return list(value)
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """A validated, complete set of parameter values and what follows from them."""
+
+    values: dict
+    scene: Scene
+    steps_per_tick: int
+
+    @property
+    def tick_period(self) -> float:
+        """Simulated seconds per tick."""
+        return 1.0 / self.values["publish_rate"]
+
+    @property
+    def wall_period(self) -> float:
+        """Wall seconds between ticks; 0 when running as fast as possible."""
+        rtf = self.values["real_time_factor"]
+        return self.tick_period / rtf if rtf > 0 else 0.0
+
+    @property
+    def telemetry_enabled(self) -> bool:
+        v = self.values
+        return bool(v["rerun_path"] or v["rerun_spawn"] or v["rerun_connect"])
+
+    def with_changes(self, changes: dict) -> "NodeConfig":
+        """A new config with `changes` applied, or ParameterRefused with nothing changed."""
+        if "scene" in changes and changes["scene"] != self.values["scene"]:
+            raise ParameterRefused("scene", "the scene is chosen at start; restart the node "
+                                   "with -p scene:=NAME")
+        return _build(self.values | changes, load=lambda name: self.scene, changed=list(changes))
+
+
+def resolve_parameters(overrides: dict) -> NodeConfig:
+    """Defaults from the scene named by `scene`, then `overrides`; every value validated."""
+    unknown = sorted(set(overrides) - set(SPECS))
+    if unknown:
+        raise ParameterRefused(unknown[0], f"unknown parameter; known: {', '.join(SPECS)}")
+    name = coerce(SPECS["scene"], overrides.get("scene", SPECS["scene"].default))
+    scene = _load(name)
+    values = {spec.name: spec.default_for(scene) for spec in PARAMETERS} | dict(overrides)
+    return _build(values, load=lambda _: scene, changed=list(overrides))
+
+
+def scene_defaults(scene_name: str) -> dict:
+    """Every parameter's default for a scene (what a transport declares)."""
+    scene = _load(scene_name)
+    return {spec.name: spec.default_for(scene) for spec in PARAMETERS} | {"scene": scene_name}
+
+
+def _load(name: str) -> Scene:
+    try:
+        return load_scene(name)
+    except SceneError as error:
+        raise ParameterRefused("scene", str(error)) from None
+
+
+def _build(values: dict, load, changed) -> NodeConfig:
+    values = {name: coerce(SPECS[name], values[name]) for name in SPECS}
+    base = load(values["scene"])
+    scene_values = {name: values[name] for name in SCENE_PARAMETERS if name in FIELD_KINDS}
+    try:
+        scene = base.replace(**scene_values)
+    except (SceneError, ParameterError) as error:
+        raise ParameterRefused(_blamed(str(error), changed), str(error)) from None
+    _check_node_values(values)
+    return NodeConfig(values, scene, steps_per_tick(values["publish_rate"], scene.step_size))
+
+
+def _blamed(message: str, changed) -> str:
+    """The parameter a scene error is about: the one it names, else the first one changed."""
+    for name in SCENE_PARAMETERS:
+        if name in message:
+            return name
+    return next((n for n in changed if n in SCENE_PARAMETERS), "scene")
+
+
+def _check_node_values(values: dict) -> None:
+    checks = (
+        ("publish_rate", values["publish_rate"] > 0, "must be positive (ticks per second)"),
+        ("real_time_factor", values["real_time_factor"] >= 0,
+         "must be >= 0 (0 = as fast as possible)"),
+        ("command_timeout", values["command_timeout"] >= 0, "must be >= 0 (0 = hold forever)"),
+        ("torque_limit", values["torque_limit"] > 0, "must be positive (N m)"),
+        ("joint_names", len(values["joint_names"]) == 2, "needs exactly two names"),
+    )
+    for name, ok, reason in checks:
+        if not ok:
+            raise ParameterRefused(name, f"{values[name]!r} {reason}")
+    joint_names = values["joint_names"]
+    if not all(joint_names) or joint_names[0] == joint_names[1]:
+        raise ParameterRefused("joint_names", f"{joint_names} must be two distinct, non-empty names")
+
+
+def steps_per_tick(rate: float, step_size: float) -> int:
+    exact = 1.0 / (rate * step_size)
+    steps = round(exact)
+    if steps < 1 or abs(steps - exact) > 1e-9 * exact:
+        raise ParameterRefused(
+            "publish_rate", f"{rate:g} Hz does not divide into steps of {step_size:g} s: one tick "
+            f"would be {exact:.6g} steps; choose publish_rate = 1 / (n x step_size)")
+    if steps > MAX_STEPS_PER_TICK:
+        raise ParameterRefused("publish_rate", f"{rate:g} Hz with step_size {step_size:g} s "
+                               f"is {steps} steps per tick; at most {MAX_STEPS_PER_TICK}")
+    return steps
