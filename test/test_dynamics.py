@@ -4,6 +4,7 @@ import random
 import pytest
 
 from arm_sim_ros.physics import dynamics, model
+from arm_sim_ros.physics.effects import POLICIES
 from arm_sim_ros.physics.integrators import RK4, compile_step
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
@@ -58,7 +59,7 @@ def test_compensating_absent_gravity_is_no_actuator():
     assert sim.dynamics.effects == () and sim.channels == ()
 
 
-@pytest.mark.parametrize("policy", dynamics.POLICIES)
+@pytest.mark.parametrize("policy", POLICIES)
 @pytest.mark.parametrize("gravity, damping", [(0.0, 0.0), (9.81, 0.0), (0.0, 0.4), (3.7, 1.2)])
 def test_generated_rhs_equals_model_forward_dynamics(policy, gravity, damping):
     arm = model.ArmParameters(link_lengths=(0.8, 1.2), link_masses=(1.5, 0.7), com_distances=(0.35, 0.6),

@@ -16,6 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .dynamics import build_dynamics
+from .effects import Damping, Gravity
 from .integrators import INTEGRATORS, compile_step
 from .model import ArmParameters
 from .scene import Scene, SceneError
@@ -93,7 +94,7 @@ class Batch:
         _refuse_where(v["com_inertias"] < 0, "com_inertias must be non-negative")
         _refuse_where(v["gravity"] < 0, "gravity is a magnitude (along -y); it must be >= 0")
         _refuse_where(v["damping"] < 0, "damping would add energy; it must be >= 0")
-        a, b, d = _coefficients(v)["inertia"]
+        a, b, d = _arm_arrays(v).inertia_coefficients
         _refuse_where(~(a * d - d * d - b * b > 1e-12 * a * d),
                       "the mass matrix becomes singular at some elbow angle")
 
@@ -105,15 +106,21 @@ class Batch:
         dynamics = build_dynamics(scene.arm, gravity_on, damping_on, scene.policy,
                                   scene.constant_torque, scene.initial_positions)
         self.channels = dynamics.channels
-        (a, b, d), (k1, k2) = _coefficients(v).values()
-        constants = {"A": a, "B": b, "TWO_B": 2.0 * b, "D": d, "G1": v["gravity"] * k1,
-                     "G2": v["gravity"] * k2, "DAMPING": v["damping"]}
+        arm = _arm_arrays(v)
+        (a, b, d), (k1, k2) = arm.inertia_coefficients, arm.gravity_coefficients
+        constants = {"A": a, "B": b, "TWO_B": 2.0 * b, "D": d}
+        # Each effect's own constants, from per-arm values where they vary per arm.
+        per_arm = {"gravity": Gravity(v["gravity"]), "damping": Damping(v["damping"])}
+        for effect in dynamics.active:
+            constants.update(per_arm.get(effect.name, effect).constants(arm))
         if scene.policy == "constant":
             constants["TORQUE1"], constants["TORQUE2"] = v["constant_torque"].T
         elif scene.policy == "frozen_gravity":
             # g(q0) per arm, as model.gravity_torque computes it for one arm.
-            g2 = constants["G2"] * np.cos(q0[:, 0] + q0[:, 1])
-            constants["TORQUE1"], constants["TORQUE2"] = constants["G1"] * np.cos(q0[:, 0]) + g2, g2
+            g1, g2 = v["gravity"] * k1, v["gravity"] * k2
+            g2 = g2 * np.cos(q0[:, 0] + q0[:, 1])
+            constants["TORQUE1"], constants["TORQUE2"] = g1 * np.cos(q0[:, 0]) + g2, g2
+        constants.pop("command", None)
         self.command = [np.zeros(self.count), np.zeros(self.count)]
         # A constant shared by every arm stays a float: scalar * array is the cheaper loop.
         self._constants = {k: _shared_or_array(c, self.count) for k, c in constants.items()}
@@ -183,13 +190,17 @@ def _shared_or_array(value, count: int):
     return float(array[0]) if (array == array[0]).all() else np.ascontiguousarray(array)
 
 
-def _coefficients(v: dict) -> dict:
-    """The model's own (a, b, d) and (k1, k2) formulas, evaluated on per-arm arrays."""
-    arrays = SimpleNamespace(**{name: (v[name][:, 0], v[name][:, 1])
-                                for name in ("link_lengths", "link_masses", "com_distances",
-                                             "com_inertias")})
-    return {"inertia": ArmParameters.inertia_coefficients.fget(arrays),
-            "gravity": ArmParameters.gravity_coefficients.fget(arrays)}
+class _ArmArrays(SimpleNamespace):
+    """Per-arm link parameters with ArmParameters' own coefficient formulas, on arrays."""
+
+    inertia_coefficients = property(ArmParameters.inertia_coefficients.fget)
+    gravity_coefficients = property(ArmParameters.gravity_coefficients.fget)
+
+
+def _arm_arrays(v: dict) -> _ArmArrays:
+    return _ArmArrays(**{name: (v[name][:, 0], v[name][:, 1])
+                         for name in ("link_lengths", "link_masses", "com_distances",
+                                      "com_inertias")})
 
 
 def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0) -> dict:

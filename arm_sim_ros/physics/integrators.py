@@ -193,7 +193,7 @@ def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAU
     if tableau.adaptive:
         return _compile_adaptive(tableau, channels, rtol, atol)
     state = MECHANICAL + tuple(f"w{j}" for j in range(channels))
-    lines = [f"def step(f, y, h):", f"    {', '.join(state)}, = y"]
+    lines = ["def step(f, y, h):", f"    {', '.join(state)}, = y"]
     lines += _stage_lines(tableau, channels, first_given=False)
     final = [_combination(x, w, terms)
              for w, x, terms in _final(tableau, channels, tableau.pos_b, tableau.b)]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from .dynamics import POLICIES
+from .effects import POLICIES
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 

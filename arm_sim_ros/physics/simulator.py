@@ -72,9 +72,9 @@ class Simulator:
         self._step = compile_step(tableau, len(self.channels), rtol=scene.rtol, atol=scene.atol)
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
-        self._work_index = 4 + self.channels.index("work") if "work" in self.channels else None
-        self._dissipated_index = (4 + self.channels.index("dissipated")
-                                  if "dissipated" in self.channels else None)
+        kinds = self.dynamics.channel_kinds
+        self._inputs = [4 + i for i, kind in enumerate(kinds) if kind == "input"]
+        self._losses = [4 + i for i, kind in enumerate(kinds) if kind == "loss"]
         self.reset()
         self._plan_substeps(tableau)
 
@@ -100,8 +100,9 @@ class Simulator:
     def _plan_substeps(self, tableau) -> None:
         """How many sub-steps keep damping stable at every elbow angle (1 = plain steps)."""
         self.stability_limit = stability.real_stability_limit(tableau)
-        self.stability_ratio = (self.scene.damping * self.step_size
-                                * stability.worst_stiffness(self.arm))
+        # h times the fastest real decay any effect adds (damping's d Lambda), at any pose.
+        self.stability_ratio = self.step_size * sum(e.stiffness(self.arm)
+                                                    for e in self.dynamics.active)
         adaptive = getattr(tableau, "adaptive", False)   # its own error control sub-steps
         self.substeps = (1 if adaptive else
                          stability.substeps_needed(self.stability_ratio, self.stability_limit))
@@ -157,7 +158,7 @@ class Simulator:
         q, qd = state[0:2], state[2:4]
         try:
             return (model.kinetic_energy(self.arm, q, qd),
-                    model.potential_energy(self.arm, q, self.scene.gravity))
+                    sum((e.stored_energy(self.arm, q) for e in self.dynamics.active), 0.0))
         except ValueError:
             return float("nan"), float("nan")
 
@@ -165,9 +166,10 @@ class Simulator:
         return sum(self.energies(state))
 
     def books(self, state) -> tuple[float, float]:
-        """(actuator work, dissipated energy) carried in a state; 0 for an absent channel."""
-        return (state[self._work_index] if self._work_index is not None else 0.0,
-                state[self._dissipated_index] if self._dissipated_index is not None else 0.0)
+        """(energy put in, energy lost) carried in a state's channels: actuator work and
+        dissipated energy today; 0 where no effect has such a channel."""
+        return (sum((state[i] for i in self._inputs), 0.0),
+                sum((state[i] for i in self._losses), 0.0))
 
     def residual(self) -> float:
         work, dissipated = self.books(self.state)
