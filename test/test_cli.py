@@ -36,7 +36,8 @@ def test_run_json_has_the_documented_keys_and_values(capsys):
     assert code == 0
     result = json.loads(out)
     assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
-                           "residual", "max_abs_energy_drift"}
+                           "channels", "residual", "max_abs_energy_drift"}
+    assert result["channels"] == {}          # the release has no actuator and no damping
     assert result["t"] == 0.5
     assert [f"{x:.6f}" for x in result["q"]] == ["-1.122654", "0.593820"]
 

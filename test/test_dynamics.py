@@ -6,7 +6,7 @@ import pytest
 from arm_sim_ros.physics import dynamics, model
 from arm_sim_ros.physics.effects import POLICIES
 from arm_sim_ros.physics.integrators import RK4, compile_step
-from arm_sim_ros.physics.scene import load_scene, preset_names
+from arm_sim_ros.physics.scene import Scene, load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 
@@ -64,8 +64,9 @@ def test_compensating_absent_gravity_is_no_actuator():
 def test_generated_rhs_equals_model_forward_dynamics(policy, gravity, damping):
     arm = model.ArmParameters(link_lengths=(0.8, 1.2), link_masses=(1.5, 0.7), com_distances=(0.35, 0.6),
                               com_inertias=(0.04, 0.09))
-    built = dynamics.build_dynamics(arm, gravity, damping, policy, constant_torque=(0.7, -0.3),
-                                    initial_positions=(0.2, 0.1))
+    scene = Scene(gravity=gravity, damping=damping, policy=policy, constant_torque=(0.7, -0.3),
+                  initial_positions=(0.2, 0.1), **{name: getattr(arm, name) for name in model.PAIR_FIELDS})
+    built = dynamics.build_dynamics(scene)
     built.command[:] = [1.5, -2.5]
     rng = random.Random(7)
     for _ in range(20):

@@ -16,9 +16,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from .dynamics import build_dynamics
-from .effects import Damping, Gravity
+from .effects import ControllerModel, Damping, Gravity
 from .integrators import INTEGRATORS, compile_step
-from .model import ArmParameters
+from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
 from .simulator import Simulator
 
@@ -73,7 +73,12 @@ class Batch:
         if count < 1:
             raise SceneError(f"a batch needs at least one arm, got {count}")
         self.scene, self.count, self.step_size = scene, count, scene.step_size
-        values = {name: _per_arm(name, parameters.get(name, getattr(scene, name)), count,
+        # Per-joint damping stays the scene's effect; per-arm damping is a scalar per arm.
+        self._shared_damping = "damping" not in parameters
+        scene_values = {name: getattr(scene, name) for name in PAIR_PARAMETERS + SCALAR_PARAMETERS}
+        if isinstance(scene.damping, tuple):
+            scene_values["damping"] = max(scene.damping)
+        values = {name: _per_arm(name, parameters.get(name, scene_values[name]), count,
                                  name in PAIR_PARAMETERS)
                   for name in PAIR_PARAMETERS + SCALAR_PARAMETERS}
         self._check_physics(values)
@@ -102,35 +107,47 @@ class Batch:
         # The source's structure (which effects exist) from the scene, switched on where
         # any arm needs an effect; its constants then become per-arm arrays.
         gravity_on = 1.0 if (v["gravity"] != 0).any() else 0.0
-        damping_on = 1.0 if (v["damping"] != 0).any() else 0.0
-        dynamics = build_dynamics(scene.arm, gravity_on, damping_on, scene.policy,
-                                  scene.constant_torque, scene.initial_positions)
-        self.channels = dynamics.channels
-        arm = _arm_arrays(v)
-        (a, b, d), (k1, k2) = arm.inertia_coefficients, arm.gravity_coefficients
-        constants = {"A": a, "B": b, "TWO_B": 2.0 * b, "D": d}
+        damping = scene.damping if self._shared_damping else (
+            1.0 if (v["damping"] != 0).any() else 0.0)
+        structure = scene.replace(gravity=gravity_on, damping=damping)
+        dynamics = build_dynamics(structure)
+        self.channels, self.extra = dynamics.channels, dynamics.extra
+        arm = _arm_arrays(v, structure)
+        a, b, d, m22 = arm.mass_constants
+        constants = {"A": a, "B": b, "TWO_B": 2.0 * b, "D": d, "M22": m22}
         # Each effect's own constants, from per-arm values where they vary per arm.
-        per_arm = {"gravity": Gravity(v["gravity"]), "damping": Damping(v["damping"])}
+        per_arm = {"gravity": Gravity(v["gravity"])}
+        if not self._shared_damping:
+            per_arm["damping"] = Damping(v["damping"])
         for effect in dynamics.active:
             constants.update(per_arm.get(effect.name, effect).constants(arm))
         if scene.policy == "constant":
             constants["TORQUE1"], constants["TORQUE2"] = v["constant_torque"].T
         elif scene.policy == "frozen_gravity":
-            # g(q0) per arm, as model.gravity_torque computes it for one arm.
-            g1, g2 = v["gravity"] * k1, v["gravity"] * k2
-            g2 = g2 * np.cos(q0[:, 0] + q0[:, 1])
-            constants["TORQUE1"], constants["TORQUE2"] = g1 * np.cos(q0[:, 0]) + g2, g2
+            # g(q0) per arm, as model.gravity_torque computes it for one arm (the believed
+            # arm's where the controller has a model of its own).
+            believed = scene.controller_model and ControllerModel(
+                scene.links, scene.gravity, scene.payload["mass"] if scene.payload else 0.0,
+                **scene.controller_model)
+            if believed:
+                (k1, k2), gravity = believed.arm.gravity_coefficients, believed.gravity
+            else:
+                (k1, k2), gravity = arm.gravity_coefficients, v["gravity"]
+            g2 = gravity * k2 * np.cos(q0[:, 0] + q0[:, 1])
+            constants["TORQUE1"], constants["TORQUE2"] = gravity * k1 * np.cos(q0[:, 0]) + g2, g2
         constants.pop("command", None)
         self.command = [np.zeros(self.count), np.zeros(self.count)]
         # A constant shared by every arm stays a float: scalar * array is the cheaper loop.
         self._constants = {k: _shared_or_array(c, self.count) for k, c in constants.items()}
-        self._namespace = dict(dynamics.function.__globals__, cos=np.cos, sin=np.sin)
+        self._namespace = dict(dynamics.function.__globals__, cos=np.cos, sin=np.sin,
+                               MIN=np.minimum, MAX=np.maximum)
         self._code = compile(dynamics.source, f"<batch rhs {scene.policy}>", "exec")
-        self._step = compile_step(INTEGRATORS["rk4"], len(self.channels))
+        self._step = compile_step(INTEGRATORS["rk4"], len(self.channels), extra=len(self.extra))
+        self.substeps = Simulator(scene).substeps   # the same stability plan as one arm
 
     def reset(self) -> None:
-        self.state = [a.copy() for a in self._initial] + [np.zeros(self.count)
-                                                          for _ in self.channels]
+        self.state = [a.copy() for a in self._initial] + [
+            np.zeros(self.count) for _ in self.extra + self.channels]
         self.steps = 0
 
     @property
@@ -146,11 +163,13 @@ class Batch:
         return np.stack(self.state[2:4], axis=1)
 
     def channel(self, name: str) -> np.ndarray:
-        """Per-arm actuator work or dissipated energy so far (zeros if the effect is absent)."""
+        """Per-arm value of a channel so far (zeros for work or dissipated energy when the
+        effect is absent)."""
+        if name in self.channels:
+            return self.state[4 + len(self.extra) + self.channels.index(name)]
         if name not in ("work", "dissipated"):
             raise KeyError(name)
-        return (self.state[4 + self.channels.index(name)] if name in self.channels
-                else np.zeros(self.count))
+        return np.zeros(self.count)
 
     def set_command(self, tau1, tau2) -> None:
         """Torque held by the `command` policies: scalars or one value per arm."""
@@ -164,9 +183,9 @@ class Batch:
         return namespace["rhs"]
 
     def _advance_chunk(self, chunk: slice, steps: int) -> None:
-        f, step, h = self._rhs_for(chunk), self._step, self.step_size
+        f, step, h = self._rhs_for(chunk), self._step, self.step_size / self.substeps
         y = tuple(a[chunk] for a in self.state)
-        for _ in range(steps):
+        for _ in range(steps * self.substeps):
             y = step(f, y, h)
         for target, value in zip(self.state, y):
             target[chunk] = value
@@ -195,12 +214,23 @@ class _ArmArrays(SimpleNamespace):
 
     inertia_coefficients = property(ArmParameters.inertia_coefficients.fget)
     gravity_coefficients = property(ArmParameters.gravity_coefficients.fget)
+    mass_constants = property(ArmParameters.mass_constants.fget)
 
 
-def _arm_arrays(v: dict) -> _ArmArrays:
-    return _ArmArrays(**{name: (v[name][:, 0], v[name][:, 1])
-                         for name in ("link_lengths", "link_masses", "com_distances",
-                                      "com_inertias")})
+def _arm_arrays(v: dict, scene: Scene | None = None) -> _ArmArrays:
+    """The per-arm links, with the scene's payload folded in and its motors' armature."""
+    links = {name: (v[name][:, 0], v[name][:, 1])
+             for name in ("link_lengths", "link_masses", "com_distances", "com_inertias")}
+    armature = (0.0, 0.0)
+    if scene is not None and scene.payload is not None:
+        folded = fold_payload(links["link_lengths"][1], links["link_masses"][1],
+                              links["com_distances"][1], links["com_inertias"][1],
+                              scene.payload["mass"])
+        for name, value in zip(("link_masses", "com_distances", "com_inertias"), folded):
+            links[name] = (links[name][0], value)
+    if scene is not None and scene.motors is not None:
+        armature = scene.arm.armature
+    return _ArmArrays(**links, armature=armature)
 
 
 def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0) -> dict:

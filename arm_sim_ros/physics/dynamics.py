@@ -25,61 +25,69 @@ RIGID_BODY = [
 ]
 SOLVE = [
     "    l21 = m12 / m11",                      # LDL^T of the SPD mass matrix
-    "    a2 = (f2 - l21 * f1) / (D - l21 * m12)",
+    "    a2 = (f2 - l21 * f1) / (M22 - l21 * m12)",
     "    a1 = f1 / m11 - l21 * a2",
 ]
 
 
 @dataclass
 class Dynamics:
-    """f(q1, q2, qd1, qd2) -> (qdd1, qdd2, *channel rates), plus what it was built from."""
+    """f(q1, q2, qd1, qd2, *extra) -> (qdd1, qdd2, *extra rates, *channel rates), plus what
+    it was built from."""
 
     function: object
     source: str
     active: tuple[Effect, ...]        # the effects, in assembly order
+    extra: tuple[str, ...]            # names of the effects' extra states (i1, i2 ...)
     channels: tuple[str, ...]         # channel names, in state order
-    channel_kinds: tuple[str, ...]    # "input" or "loss", per channel
+    channel_kinds: tuple[str, ...]    # "input", "loss" or "transfer", per channel
     arm: model.ArmParameters
+    torque_function: object           # the same lines up to the joint torque: (t1, t2)
     command: list = field(default_factory=lambda: [0.0, 0.0])
 
     @property
     def effects(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.active)
 
+    def joint_torque(self, state):
+        """(tau1, tau2) the joints receive at `state` (after effort limits and windings)."""
+        return self.torque_function(*state[:4 + len(self.extra)])
+
     def applied_torque(self, q):
-        """(tau1, tau2) as the policy applies it at configuration q now."""
-        for effect in self.active:
-            if effect.drives:
-                return effect.applied_torque(self.arm, q)
-        return 0.0, 0.0
+        """(tau1, tau2) the joints receive at configuration q at rest (no extra state)."""
+        return self.torque_function(q[0], q[1], 0.0, 0.0, *(0.0,) * len(self.extra))
 
 
 def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -> Dynamics:
     """Generate and compile f from the rigid body and `effects`: their stage terms in list
     order, then their forces, inputs first (f = τ − c − g − D q̇ …)."""
-    a, b, d = arm.inertia_coefficients
-    namespace = {"cos": cos, "sin": sin, "A": a, "B": b, "TWO_B": 2.0 * b, "D": d}
+    a, b, d, m22 = arm.mass_constants
+    namespace = {"cos": cos, "sin": sin, "MIN": min, "MAX": max,
+                 "A": a, "B": b, "TWO_B": 2.0 * b, "D": d, "M22": m22}
     for effect in effects:
         namespace.update(effect.constants(arm))
-    lines = ["def rhs(q1, q2, u1, u2):"] + RIGID_BODY
-    for effect in effects:
-        lines += ["    " + line for line in effect.terms()]
+    extra = [name for effect in effects for name in effect.state]
+    signature = ", ".join(["q1", "q2", "u1", "u2"] + extra)
+    terms = ["    " + line for effect in effects for line in effect.terms()]
+    lines = [f"def rhs({signature}):"] + RIGID_BODY + terms
     for effect in sorted(effects, key=lambda e: not e.drives):
         lines += ["    " + line for line in effect.forces()]
     channels = [c for effect in effects for c in effect.channels()]
-    lines += SOLVE + ["    return " + ", ".join(["a1", "a2"] + [c.rate for c in channels])]
+    rates = [r for effect in effects for r in effect.rates()]
+    lines += SOLVE + ["    return " + ", ".join(["a1", "a2"] + rates + [c.rate for c in channels])]
+    drives = any(effect.drives for effect in effects)
+    torque = ([f"def torque({signature}):"] + terms + ["    return t1, t2"] if drives else
+              [f"def torque({signature}):", "    return 0.0, 0.0"])
     source = "\n".join(lines) + "\n"
     names = "+".join(e.name for e in effects) or "free"
     exec(compile(source, f"<rhs {label}, {names}>", "exec"), namespace)
-    return Dynamics(namespace["rhs"], source, tuple(effects), tuple(c.name for c in channels),
-                    tuple(c.kind for c in channels), arm,
-                    command if command is not None else [0.0, 0.0])
+    exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
+    return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
+                    tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
+                    namespace["torque"], command if command is not None else [0.0, 0.0])
 
 
-def build_dynamics(arm: model.ArmParameters, gravity: float, damping: float, policy: str,
-                   constant_torque=(0.0, 0.0), initial_positions=(0.0, 0.0)) -> Dynamics:
-    """The dynamics of a scene with these values (effects whose value is 0 are absent)."""
-    command = [0.0, 0.0]
-    effects = scene_effects(arm, gravity, damping, policy, constant_torque, initial_positions,
-                            command)
-    return assemble(arm, effects, command, label=policy)
+def build_dynamics(scene, command=None) -> Dynamics:
+    """The dynamics of a scene: exactly the effects it names (effects/scene_effects)."""
+    command = [0.0, 0.0] if command is None else command
+    return assemble(scene.arm, scene_effects(scene, command), command, label=scene.policy)

@@ -149,7 +149,19 @@ def _combination(base: str | None, coefficients, terms) -> str:
     return head + total + (f" / {den}.0" if den != 1 else "")
 
 
-def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool) -> list[str]:
+def _state(extra: int, channels: int) -> tuple:
+    """State entry names: angles, velocities, an effect's extra states, channels."""
+    return (MECHANICAL + tuple(f"x{k}" for k in range(extra))
+            + tuple(f"w{j}" for j in range(channels)))
+
+
+def _slopes(extra: int, channels: int) -> list:
+    return (["v1", "v2", "a1", "a2"] + [f"xd{k}" for k in range(extra)]
+            + [f"r{j}" for j in range(channels)])
+
+
+def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool,
+                 extra: int = 0) -> list[str]:
     """Stage inputs and f calls, skipping whatever no weight uses."""
     evaluated = tableau.evaluated_stages()
     lines = []
@@ -164,20 +176,24 @@ def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool) -> l
             rows = tableau.pos_a if is_position else tableau.a
             names.append(f"{stage}_{i}")
             inputs.append(_combination(x, rows[i], [f"{slope}_{j}" for j in range(i)]))
+        if i in evaluated:   # extra states (winding currents...) are read only where f is
+            for k in range(extra):
+                names.append(f"e{k}_{i}")
+                inputs.append(_combination(f"x{k}", tableau.a[i], [f"xd{k}_{j}" for j in range(i)]))
         if names:
             lines.append(f"    {', '.join(names)} = {', '.join(inputs)}")
         if i in evaluated and not (first_given and i == 0):
-            outputs = [f"a1_{i}", f"a2_{i}"] + [f"r{j}_{i}" for j in range(channels)]
-            lines.append(f"    {', '.join(outputs)}, = f(p1_{i}, p2_{i}, v1_{i}, v2_{i})")
+            outputs = ([f"a1_{i}", f"a2_{i}"] + [f"xd{k}_{i}" for k in range(extra)]
+                       + [f"r{j}_{i}" for j in range(channels)])
+            arguments = [f"p1_{i}", f"p2_{i}", f"v1_{i}", f"v2_{i}"] + [f"e{k}_{i}" for k in range(extra)]
+            lines.append(f"    {', '.join(outputs)}, = f({', '.join(arguments)})")
     return lines
 
 
-def _final(tableau: ButcherTableau, channels: int, position_b, b) -> list[str]:
+def _final(tableau: ButcherTableau, channels: int, position_b, b, extra: int = 0) -> list[str]:
     """The weighted sums of the slopes for each state entry (base None: the increment only)."""
-    state = MECHANICAL + tuple(f"w{j}" for j in range(channels))
-    slopes = ["v1", "v2", "a1", "a2"] + [f"r{j}" for j in range(channels)]
     return [(position_b if n < 2 else b, x, [f"{k}_{j}" for j in range(tableau.stages)])
-            for n, (x, k) in enumerate(zip(state, slopes))]
+            for n, (x, k) in enumerate(zip(_state(extra, channels), _slopes(extra, channels)))]
 
 
 def _exec(source: str, name: str, namespace: dict):
@@ -186,20 +202,21 @@ def _exec(source: str, name: str, namespace: dict):
 
 
 def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAULT_RTOL,
-                 atol: float = DEFAULT_ATOL):
-    """step(f, y, h) -> next y, for y = (q1, q2, qd1, qd2, *channels) and
-    f(q1, q2, qd1, qd2) -> (qdd1, qdd2, *channel rates). rtol/atol only matter for
-    embedded pairs."""
+                 atol: float = DEFAULT_ATOL, extra: int = 0):
+    """step(f, y, h) -> next y, for y = (q1, q2, qd1, qd2, *extra, *channels) and
+    f(q1, q2, qd1, qd2, *extra) -> (qdd1, qdd2, *extra rates, *channel rates). `extra` are
+    states effects add (winding currents), integrated like velocities. rtol/atol only
+    matter for embedded pairs."""
     if tableau.adaptive:
-        return _compile_adaptive(tableau, channels, rtol, atol)
-    state = MECHANICAL + tuple(f"w{j}" for j in range(channels))
+        return _compile_adaptive(tableau, channels, rtol, atol, extra)
+    state = _state(extra, channels)
     lines = ["def step(f, y, h):", f"    {', '.join(state)}, = y"]
-    lines += _stage_lines(tableau, channels, first_given=False)
+    lines += _stage_lines(tableau, channels, first_given=False, extra=extra)
     final = [_combination(x, w, terms)
-             for w, x, terms in _final(tableau, channels, tableau.pos_b, tableau.b)]
+             for w, x, terms in _final(tableau, channels, tableau.pos_b, tableau.b, extra)]
     lines.append(f"    return ({', '.join(final)},)")
     source = "\n".join(lines) + "\n"
-    step = _exec(source, f"<{tableau.name} step, {channels} channels>", {})["step"]
+    step = _exec(source, f"<{tableau.name} step, {extra} extra, {channels} channels>", {})["step"]
     step.source = source
     return step
 
@@ -208,25 +225,27 @@ def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAU
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
 
-def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol: float):
+def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol: float,
+                      extra: int = 0):
     """One attempt is straight-line code: new state, last-stage slopes (FSAL) and the
     RMS error norm scaled by atol + rtol |y|; the controller around it is a plain loop."""
     if not (rtol > 0 and atol > 0):
         raise ValueError(f"{tableau.name}: rtol and atol must be positive, got {rtol}, {atol}")
-    state = MECHANICAL + tuple(f"w{j}" for j in range(channels))
-    first = ["a1_0", "a2_0"] + [f"r{j}_0" for j in range(channels)]
+    state = _state(extra, channels)
+    first = [f"{k}_0" for k in _slopes(extra, channels)[2:]]
     last = tableau.stages - 1
     lines = [f"def attempt(f, {', '.join(state)}, h, {', '.join(first)}):"]
-    lines += _stage_lines(tableau, channels, first_given=True)
+    lines += _stage_lines(tableau, channels, first_given=True, extra=extra)
     error_weights = [b - e for b, e in zip(tableau.b, tableau.embedded_b)]
     squares = []
-    for (w, x, terms), (ew, _, _) in zip(_final(tableau, channels, tableau.pos_b, tableau.b),
-                                         _final(tableau, channels, error_weights, error_weights)):
+    for (w, x, terms), (ew, _, _) in zip(_final(tableau, channels, tableau.pos_b, tableau.b, extra),
+                                         _final(tableau, channels, error_weights, error_weights,
+                                                extra)):
         lines.append(f"    n_{x} = {_combination(x, w, terms)}")
         lines.append(f"    e_{x} = ({_combination(None, ew, terms)}) "
                      f"/ (ATOL + RTOL * max(abs({x}), abs(n_{x})))")
         squares.append(f"e_{x} * e_{x}")
-    outputs = [f"a1_{last}", f"a2_{last}"] + [f"r{j}_{last}" for j in range(channels)]
+    outputs = [f"{k}_{last}" for k in _slopes(extra, channels)[2:]]
     lines.append(f"    return ({', '.join(f'n_{x}' for x in state)},), "
                  f"({', '.join(outputs)},), sqrt(({' + '.join(squares)}) / {len(state)}.0)")
     source = "\n".join(lines) + "\n"
@@ -239,7 +258,7 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
     def step(f, y, h):
         # Stateless between calls (each publish interval starts from a trial sub-step of
         # h), so reset() and replays are reproducible bit for bit.
-        slopes = f(*y[:4])
+        slopes = f(*y[:4 + extra])
         done, dt = 0.0, h
         while True:
             remaining = h - done

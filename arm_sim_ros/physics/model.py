@@ -6,7 +6,7 @@ links horizontal. Plain floats: a 2-DOF arm is far cheaper without numpy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from math import cos, isfinite, sin
 
 PAIR_FIELDS = ("link_lengths", "link_masses", "com_distances", "com_inertias")
@@ -27,9 +27,10 @@ class ArmParameters:
     link_masses: tuple[float, float] = (1.0, 1.0)
     com_distances: tuple[float, float] = (0.5, 0.5)
     com_inertias: tuple[float, float] = (1.0 / 12.0, 1.0 / 12.0)
+    armature: tuple[float, float] = (0.0, 0.0)    # reflected rotor inertia added to M11, M22
 
     def __post_init__(self):
-        for name in PAIR_FIELDS:
+        for name in PAIR_FIELDS + ("armature",):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 2:
                 raise ParameterError(f"{name} needs two values (one per link), got {len(value)}")
@@ -40,15 +41,16 @@ class ArmParameters:
             ("link_lengths", lambda v: v > 0, "positive"),
             ("link_masses", lambda v: v > 0, "positive"),
             ("com_inertias", lambda v: v >= 0, "non-negative"),
+            ("armature", lambda v: v >= 0, "non-negative"),
         ):
             for i, v in enumerate(getattr(self, name)):
                 if not test(v):
                     raise ParameterError(f"{name}[{i}] = {v} is impossible: it must be {what}")
         # det M(q2) is smallest at full extension or fold (cos q2 = +-1); a set whose
         # determinant vanishes there has a singular mass matrix and cannot be simulated.
-        a, b, d = self.inertia_coefficients
-        det_min = a * d - d * d - b * b
-        if not det_min > 1e-12 * a * d:
+        a, b, d, m22 = self.mass_constants
+        det_min = a * m22 - d * d - b * b
+        if not det_min > 1e-12 * a * m22:
             raise ParameterError(
                 "the mass matrix becomes singular at some elbow angle "
                 f"(min det M = {det_min:.3g}); link 2 needs mass away from the elbow axis or inertia")
@@ -64,17 +66,43 @@ class ArmParameters:
         return a, b, d
 
     @property
+    def mass_constants(self) -> tuple[float, float, float, float]:
+        """(A, b, d, M22): M11 = A + 2b cos q2, M12 = d + b cos q2, M22, armature included."""
+        a, b, d = self.inertia_coefficients
+        return a + self.armature[0], b, d, d + self.armature[1]
+
+    def with_payload(self, mass: float) -> "ArmParameters":
+        """The arm with a point mass at the tip of link 2, folded into link 2 exactly: the
+        combined mass, its centre of mass and its inertia about that centre."""
+        if mass == 0.0:
+            return self
+        total, com, inertia = fold_payload(self.link_lengths[1], self.link_masses[1],
+                                           self.com_distances[1], self.com_inertias[1], mass)
+        return replace(self, link_masses=(self.link_masses[0], total),
+                       com_distances=(self.com_distances[0], com),
+                       com_inertias=(self.com_inertias[0], inertia))
+
+    @property
     def gravity_coefficients(self) -> tuple[float, float]:
         """(k1, k2) with V = gravity (k1 sin q1 + k2 sin(q1 + q2))."""
         (l1, _), (m1, m2), (r1, r2) = self.link_lengths, self.link_masses, self.com_distances
         return m1 * r1 + m2 * l1, m2 * r2
 
 
+def fold_payload(length, mass, com, inertia, payload):
+    """Link 2 with a point mass `payload` at its tip: (mass, centre of mass, inertia about
+    it). Plain arithmetic, so it also folds per-arm arrays (Batch)."""
+    total = mass + payload
+    combined = (mass * com + payload * length) / total
+    return (total, combined,
+            inertia + mass * (com - combined) ** 2 + payload * (length - combined) ** 2)
+
+
 def mass_matrix(arm: ArmParameters, q):
     """(M11, M12, M22) of the symmetric joint-space mass matrix."""
-    a, b, d = arm.inertia_coefficients
+    a, b, d, m22 = arm.mass_constants
     c2 = cos(q[1])
-    return a + 2.0 * b * c2, d + b * c2, d
+    return a + 2.0 * b * c2, d + b * c2, m22
 
 
 def velocity_torque(arm: ArmParameters, q, qd):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from .effects import POLICIES
+from .effects import MAPPING_EFFECTS, POLICIES, EffortLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
@@ -32,13 +32,19 @@ class Scene:
     initial_positions: tuple[float, float] = (0.0, 0.0)
     initial_velocities: tuple[float, float] = (0.0, 0.0)
     gravity: float = 9.81            # magnitude along -y; 0 = no gravity effect
-    damping: float = 0.0             # D = damping * I; 0 = no damping effect
+    damping: float | tuple = 0.0     # d (D = d I) or [d1, d2] per joint; 0 = no damping effect
     link_lengths: tuple[float, float] = ArmParameters.link_lengths
     link_masses: tuple[float, float] = ArmParameters.link_masses
     com_distances: tuple[float, float] = ArmParameters.com_distances
     com_inertias: tuple[float, float] = ArmParameters.com_inertias
     policy: str = "zero"
     constant_torque: tuple[float, float] = (0.0, 0.0)
+    # Effects named by a mapping of their parameters (effects/*.py); None = absent.
+    springs: dict | None = None
+    payload: dict | None = None
+    motors: dict | None = None
+    effort_limits: tuple | None = None
+    controller_model: dict | None = None
     integrator: str = "rk4"
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
@@ -55,8 +61,8 @@ class Scene:
                              f"{MAX_INITIAL_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
-        if self.damping < 0:
-            raise SceneError(f"damping = {self.damping} would add energy; it must be >= 0")
+        if min(_pair(self.damping)) < 0:
+            raise SceneError(f"damping = {_text(self.damping)} would add energy; it must be >= 0")
         if self.policy not in POLICIES:
             raise SceneError(f"policy {self.policy!r} is unknown; choose one of {', '.join(POLICIES)}")
         if self.integrator not in INTEGRATORS:
@@ -76,14 +82,34 @@ class Scene:
             raise SceneError(str(error)) from None
 
     @property
-    def arm(self) -> ArmParameters:
+    def links(self) -> ArmParameters:
+        """The bare links: no payload, no rotor inertia."""
         return ArmParameters(**{name: getattr(self, name) for name in PAIR_FIELDS})
 
+    @property
+    def arm(self) -> ArmParameters:
+        """The arm the physics moves: links, the payload folded into link 2, and the motors'
+        reflected rotor inertia."""
+        arm = self.links
+        if self.motors is not None:
+            arm = dataclass_replace(arm, armature=Motors(**self.motors).armature)
+        if self.payload is not None:
+            arm = arm.with_payload(self.payload["mass"])
+        return arm
+
     def replace(self, **overrides) -> "Scene":
-        unknown = sorted(set(overrides) - set(FIELD_KINDS))
-        if unknown:
-            raise SceneError(f"unknown scene key {unknown[0]!r}; known keys: {', '.join(FIELD_KINDS)}")
-        return dataclass_replace(self, **overrides)
+        """A new scene with `overrides`; `effect.key` names one parameter of an effect."""
+        merged = {}
+        for key, value in overrides.items():
+            effect, dot, parameter = key.partition(".")
+            if dot and effect in MAPPING_EFFECTS:
+                current = merged.get(effect, getattr(self, effect)) or {}
+                merged[effect] = dict(current) | {parameter: value}
+            elif key in FIELD_KINDS:
+                merged[key] = value
+            else:
+                raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+        return dataclass_replace(self, **merged)
 
     def with_text_overrides(self, assignments) -> "Scene":
         """Apply `key=value` strings as the command line gives them (pairs as `1,0`)."""
@@ -93,8 +119,6 @@ class Scene:
             key = key.strip()
             if not sep or not key:
                 raise SceneError(f"--set {text!r} is not of the form key=value")
-            if key not in FIELD_KINDS:
-                raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
             overrides[key] = parse_value(key, value)
         return self.replace(**overrides)
 
@@ -112,11 +136,39 @@ class Scene:
 
 FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
                         "float" if f.type == "float" else "str") for f in fields(Scene)}
+FIELD_KINDS |= {"damping": "float_or_pair", "effort_limits": "pair_or_none"}
+FIELD_KINDS |= {name: "effect" for name in MAPPING_EFFECTS}
+
+
+def _pair(value) -> tuple:
+    return value if isinstance(value, tuple) else (value, value)
+
+
+def _text(value) -> str:
+    return str(list(value)) if isinstance(value, tuple) else str(value)
 
 
 def coerce_value(name: str, kind: str, value):
-    """`value` as the kind ("float", "str" or "pair") needs it, or SceneError saying why.
-    Also the node's check for its own numbers, text and pairs."""
+    """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
+    "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
+    its own numbers, text and pairs."""
+    if kind == "float_or_pair":
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+            return coerce_value(name, "float", value)
+        pair = coerce_value(name, "pair", value)
+        return 0.0 if pair == (0.0, 0.0) else pair
+    if kind == "pair_or_none":
+        return None if value is None else _effect_value(name, EffortLimits.parameter, value)
+    if kind == "effect":
+        if value is None:
+            return None
+        try:
+            values = validate(name, MAPPING_EFFECTS[name].parameters, value)
+            if name == "motors":
+                Motors(**values)          # its cross-checks: windings all three or none
+        except ParameterError as error:
+            raise SceneError(str(error)) from None
+        return values
     if kind == "str":
         if not isinstance(value, str):
             raise SceneError(f"{name} must be text, got {value!r}")
@@ -135,8 +187,29 @@ def coerce_value(name: str, kind: str, value):
     return value
 
 
+def _effect_value(name, parameter, value):
+    try:
+        return parameter.coerce(name.partition(".")[0], value)
+    except ParameterError as error:
+        raise SceneError(str(error)) from None
+
+
 def parse_value(key: str, text: str):
-    kind = FIELD_KINDS[key]
+    """A value as the command line writes it: numbers, pairs as `1,0`, text."""
+    effect, dot, name = key.partition(".")
+    if dot and effect in MAPPING_EFFECTS:
+        known = {p.name: p for p in MAPPING_EFFECTS[effect].parameters}
+        if name not in known:
+            raise SceneError(f"{key} is not a key of {effect}; its keys: {', '.join(known)}")
+        kind = known[name].kind
+    elif key in FIELD_KINDS:
+        kind = FIELD_KINDS[key]
+    else:
+        raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+    if kind in ("float_or_pair", "pair_or_none"):
+        kind = "pair" if "," in text else "float"
+    if kind == "effect":
+        raise SceneError(f"--set {key}=... sets one parameter at a time: {key}.NAME=VALUE")
     try:
         if kind == "pair":
             return tuple(float(v) for v in text.split(","))

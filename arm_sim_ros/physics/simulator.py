@@ -10,7 +10,7 @@ that would leave the finite numbers is refused: the last finite state is kept an
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from math import isfinite
 
 from . import model, stability
@@ -43,44 +43,61 @@ class Sample:
     work: float
     dissipated: float
     initial_energy: float
+    extra: dict = field(default_factory=dict)      # the effects' extra states (i1, i2 ...)
+    channels: dict = field(default_factory=dict)   # every channel by name
+    inputs: float | None = None    # Σ input channels (None: the actuator work alone)
+    losses: float | None = None    # Σ loss channels (None: the dissipated energy alone)
 
     @property
     def total(self) -> float:
+        """E: kinetic plus every stored energy (gravity, springs, windings)."""
         return self.kinetic + self.potential
 
     @property
     def residual(self) -> float:
-        """E(t) - E(0) - W + dissipated: zero for an exact integration."""
-        return self.total - self.initial_energy - self.work + self.dissipated
+        """E(t) - E(0) - inputs + losses: zero for an exact integration."""
+        inputs = self.work if self.inputs is None else self.inputs
+        losses = self.dissipated if self.losses is None else self.losses
+        return self.total - self.initial_energy - inputs + losses
 
     def as_dict(self) -> dict:
         return {"t": self.t, "q": list(self.q), "qd": list(self.qd), "tau": list(self.tau),
-                "kinetic": self.kinetic, "potential": self.potential, "total": self.total,
-                "work": self.work, "dissipated": self.dissipated, "residual": self.residual}
+                **self.extra, "kinetic": self.kinetic, "potential": self.potential,
+                "total": self.total, "work": self.work, "dissipated": self.dissipated,
+                "channels": dict(self.channels), "residual": self.residual}
 
 
 class Simulator:
     def __init__(self, scene: Scene):
         self.scene = scene
-        self.arm = scene.arm
         self.step_size = scene.step_size
-        self.dynamics = build_dynamics(self.arm, scene.gravity, scene.damping, scene.policy,
-                                       scene.constant_torque, scene.initial_positions)
-        self.channels = self.dynamics.channels
-        self._rhs = self.dynamics.function
-        tableau = INTEGRATORS[scene.integrator]
-        self._step = compile_step(tableau, len(self.channels), rtol=scene.rtol, atol=scene.atol)
+        self._tableau = INTEGRATORS[scene.integrator]
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
-        kinds = self.dynamics.channel_kinds
-        self._inputs = [4 + i for i, kind in enumerate(kinds) if kind == "input"]
-        self._losses = [4 + i for i, kind in enumerate(kinds) if kind == "loss"]
+        self.steps = 0
+        self._build(scene)
         self.reset()
-        self._plan_substeps(tableau)
+
+    def _build(self, scene: Scene, command=None) -> None:
+        """Dynamics, step and stability plan of `scene` (again after a payload change)."""
+        self.scene, self.arm = scene, scene.arm
+        self.dynamics = build_dynamics(scene, command)
+        self.channels = self.dynamics.channels
+        self.extra = self.dynamics.extra
+        self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
+        self._rhs = self.dynamics.function
+        self._step = compile_step(self._tableau, len(self.channels), rtol=scene.rtol,
+                                  atol=scene.atol, extra=len(self.extra))
+        first = 4 + len(self.extra)
+        kinds = self.dynamics.channel_kinds
+        self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
+        self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
+        self._plan_substeps(self._tableau)
 
     def reset(self) -> None:
         s = self.scene
-        self.state = (*s.initial_positions, *s.initial_velocities) + (0.0,) * len(self.channels)
+        self.state = ((*s.initial_positions, *s.initial_velocities)
+                      + (0.0,) * (len(self.extra) + len(self.channels)))
         self.steps = 0
         self.fault = None            # why the latest refused step was refused, None if none
         self.refused_steps = 0
@@ -97,21 +114,53 @@ class Simulator:
         self.dynamics.command[0] = tau1
         self.dynamics.command[1] = tau2
 
+    def set_payload(self, mass: float) -> None:
+        """Grasp (mass grows: M(q) q̇ is kept, an inelastic grasp of a mass at rest) or
+        release (q̇ is kept) a payload now; the energy that changes hands is booked in the
+        `payload_exchange` channel, so the balance still closes."""
+        before = self.energy(self.state)
+        old_mass = self.scene.payload["mass"] if self.scene.payload is not None else 0.0
+        old_names, old_state, old_arm = self.state_names, self.state, self.arm
+        self._build(self.scene.replace(payload={"mass": mass}), self.dynamics.command)
+        q, qd = old_state[0:2], old_state[2:4]
+        if mass > old_mass:
+            m11, m12, m22 = model.mass_matrix(old_arm, q)
+            momentum = (m11 * qd[0] + m12 * qd[1], m12 * qd[0] + m22 * qd[1])
+            qd = model.solve_mass_matrix(*model.mass_matrix(self.arm, q), *momentum)
+        carried = dict(zip(old_names, old_state))
+        state = [carried.get(name, 0.0) for name in self.state_names]
+        state[2:4] = qd
+        exchange = self.state_names.index("payload_exchange")
+        state[exchange] += self.energy(state) - before
+        self.state = tuple(state)
+
     def _plan_substeps(self, tableau) -> None:
-        """How many sub-steps keep damping stable at every elbow angle (1 = plain steps)."""
-        self.stability_limit = stability.real_stability_limit(tableau)
-        # h times the fastest real decay any effect adds (damping's d Lambda), at any pose.
-        self.stability_ratio = self.step_size * sum(e.stiffness(self.arm)
-                                                    for e in self.dynamics.active)
+        """How many sub-steps keep the stiff effects stable at every elbow angle (1 = plain
+        steps): damping alone has real eigenvalues (the real-axis limit); springs and
+        windings oscillate, so their bound |lambda| is kept inside the half-disk."""
+        active = self.dynamics.active
+        decay = sum(e.stiffness(self.arm) for e in active)
+        oscillation = sum(e.frequency(self.arm) for e in active)
+        disk = stability.half_disk_limit(tableau) if oscillation else 0.0
+        if oscillation and disk > 0.1:     # (Euler's half-disk is empty: nothing to plan)
+            self.stability_limit = disk
+            self.stability_ratio = self.step_size * (decay + oscillation)
+            what = "h |lambda|max"
+        else:
+            self.stability_limit = stability.real_stability_limit(tableau)
+            # h times the fastest real decay any effect adds (damping's d Lambda), at any pose.
+            self.stability_ratio = self.step_size * decay
+            what = "d h lambda_max"
         adaptive = getattr(tableau, "adaptive", False)   # its own error control sub-steps
         self.substeps = (1 if adaptive else
                          stability.substeps_needed(self.stability_ratio, self.stability_limit))
         self._advance = stability.substepping(self._step, self.substeps)
         if self.substeps > 1:
+            stiff = "+".join(e.name for e in active if e.stiffness(self.arm) or e.frequency(self.arm))
             self._emit("substepping", (
-                f"d h lambda_max = {self.stability_ratio:.4g} exceeds {tableau.name}'s stability "
-                f"limit {self.stability_limit:.4g}: each {self.step_size:g} s step is taken as "
-                f"{self.substeps} sub-steps"))
+                f"{what} = {self.stability_ratio:.4g} ({stiff}) exceeds {tableau.name}'s "
+                f"stability limit {self.stability_limit:.4g}: each {self.step_size:g} s step "
+                f"is taken as {self.substeps} sub-steps"))
 
     @property
     def substeps_taken(self) -> int:
@@ -133,9 +182,8 @@ class Simulator:
             if total - total == 0.0 or all(isfinite(v) for v in y):  # inf - inf, NaN are NaN
                 self.state = y
             else:
-                names = ("q1", "q2", "qd1", "qd2") + self.channels
                 self._refuse("would make " + ", ".join(
-                    f"{n} = {v}" for n, v in zip(names, y) if not isfinite(v)))
+                    f"{n} = {v}" for n, v in zip(self.state_names, y) if not isfinite(v)))
         self.steps += 1
 
     def _refuse(self, why: str) -> None:
@@ -153,21 +201,32 @@ class Simulator:
             listener(event)
 
     def energies(self, state) -> tuple[float, float]:
-        """(kinetic, potential); NaN where they cannot be evaluated (angles near 1e308
-        make sin fail), so a held absurd state is reported rather than crashing."""
-        q, qd = state[0:2], state[2:4]
+        """(kinetic, stored: gravity, springs, windings); NaN where they cannot be evaluated
+        (angles near 1e308 make sin fail), so a held absurd state is reported, not a crash."""
+        q, qd, extra = state[0:2], state[2:4], state[4:4 + len(self.extra)]
         try:
-            return (model.kinetic_energy(self.arm, q, qd),
-                    sum((e.stored_energy(self.arm, q) for e in self.dynamics.active), 0.0))
-        except ValueError:
+            stored = 0.0
+            for effect in self.dynamics.active:
+                stored += effect.stored_energy(self.arm, q, extra[self._extra_at(effect)])
+            return model.kinetic_energy(self.arm, q, qd), stored
+        except (ValueError, OverflowError):
             return float("nan"), float("nan")
+
+    def _extra_at(self, effect) -> slice:
+        start = self.extra.index(effect.state[0]) if effect.state else 0
+        return slice(start, start + len(effect.state))
 
     def energy(self, state) -> float:
         return sum(self.energies(state))
 
+    def channel_values(self, state) -> dict:
+        first = 4 + len(self.extra)
+        return dict(zip(self.channels, state[first:first + len(self.channels)]))
+
     def books(self, state) -> tuple[float, float]:
-        """(energy put in, energy lost) carried in a state's channels: actuator work and
-        dissipated energy today; 0 where no effect has such a channel."""
+        """(energy put in, energy lost) carried in a state's channels: Σ input channels
+        (actuator work, or electrical input with windings; payload exchange) and Σ loss
+        channels (dissipated, copper loss ...); 0 where no effect has such a channel."""
         return (sum((state[i] for i in self._inputs), 0.0),
                 sum((state[i] for i in self._losses), 0.0))
 
@@ -175,14 +234,22 @@ class Simulator:
         work, dissipated = self.books(self.state)
         return self.energy(self.state) - self.initial_energy - work + dissipated
 
+    def joint_torque(self, state=None) -> tuple[float, float]:
+        """The torque the joints receive at `state` (now): after limits and windings."""
+        return tuple(self.dynamics.joint_torque(self.state if state is None else state))
+
     def sample(self) -> Sample:
         y = self.state
         q, qd = (y[0], y[1]), (y[2], y[3])
         kinetic, potential = self.energies(y)
-        work, dissipated = self.books(y)
-        return Sample(t=self.time, q=q, qd=qd, tau=tuple(self.dynamics.applied_torque(q)),
-                      kinetic=kinetic, potential=potential, work=work, dissipated=dissipated,
-                      initial_energy=self.initial_energy)
+        channels = self.channel_values(y)
+        inputs, losses = self.books(y)
+        return Sample(t=self.time, q=q, qd=qd, tau=self.joint_torque(y),
+                      kinetic=kinetic, potential=potential, work=channels.get("work", 0.0),
+                      dissipated=channels.get("dissipated", 0.0),
+                      initial_energy=self.initial_energy,
+                      extra=dict(zip(self.extra, y[4:4 + len(self.extra)])),
+                      channels=channels, inputs=inputs, losses=losses)
 
     def run(self, duration: float, on_step=None) -> float:
         """Advance by `duration` (a whole number of steps); return the largest |residual|

@@ -21,7 +21,7 @@ against Radau; treating damping implicitly (split exact damping flow) was passiv
 from __future__ import annotations
 
 from fractions import Fraction
-from math import ceil, hypot, pi
+from math import ceil, cos, hypot, pi, sin
 
 from .integrators import RK4, ButcherTableau
 from .model import ArmParameters, mass_matrix
@@ -65,6 +65,28 @@ def real_stability_limit(tableau: ButcherTableau) -> float:
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if amplification(mid) <= 1.0 else (lo, mid)
+    return lo
+
+
+def half_disk_limit(tableau: ButcherTableau) -> float:
+    """The largest r with |R(z)| <= 1 on the whole left half-disk |z| <= r (2.61 for RK4):
+    where springs and windings put oscillatory eigenvalues, not only real ones."""
+    coefficients = [complex(c) for c in stability_polynomial(tableau)]
+    angles = [pi / 2 + pi / 2 * k / 90 for k in range(91)]
+
+    def stable(r):
+        return all(abs(sum(c * (r * complex(cos(a), sin(a))) ** k
+                           for k, c in enumerate(coefficients))) <= 1.0 + 1e-12 for a in angles)
+
+    r, dr = 0.0, 1e-2
+    while stable(r + dr):
+        r += dr
+        if r > 1e3:
+            return float("inf")
+    lo, hi = r, r + dr
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
     return lo
 
 

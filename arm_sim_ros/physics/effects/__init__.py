@@ -1,28 +1,77 @@
 """Effects a scene can call for, one module each, behind one interface (base.Effect).
 
-`scene_effects` lists, in assembly order, exactly the effects a scene's values switch on;
-an effect it does not list contributes no code, no state and no cost.
+`scene_effects` lists, in assembly order, exactly the effects a scene names: an effect it
+does not list contributes no code, no state, no channel and no cost.
 """
 from __future__ import annotations
 
+from .. import model
 from .actuator import POLICIES, Actuator
-from .base import Channel, Effect
+from .base import Channel, Effect, Parameter, validate
+from .controller_model import ControllerModel
 from .damping import Damping
+from .effort_limits import EffortLimits
 from .gravity import Gravity
+from .motors import Motors
+from .payload import Payload
+from .springs import Springs
 
-__all__ = ["POLICIES", "Actuator", "Channel", "Damping", "Effect", "Gravity", "scene_effects"]
+__all__ = ["POLICIES", "Actuator", "Channel", "ControllerModel", "Damping", "Effect",
+           "EffortLimits", "Gravity", "Motors", "Parameter", "Payload", "Springs",
+           "MAPPING_EFFECTS", "scene_effects", "validate"]
+
+# Scene keys whose value is a mapping of the effect's parameters.
+MAPPING_EFFECTS = {"springs": Springs, "payload": Payload, "motors": Motors,
+                   "controller_model": ControllerModel}
+COMPENSATING = ("gravity_compensation", "command_gravity_compensation")
 
 
-def scene_effects(arm, gravity, damping, policy: str, constant_torque=(0.0, 0.0),
-                  initial_positions=(0.0, 0.0), command=None) -> list[Effect]:
-    """Gravity first (compensation reads its g1, g2), then the actuator, then the losses."""
-    effects = []
-    if gravity != 0.0:
-        effects.append(Gravity(gravity))
-    actuator = Actuator.for_policy(arm, policy, gravity, constant_torque, initial_positions,
-                                   command)
+def scene_effects(scene, command=None) -> list[Effect]:
+    """The scene's effects in assembly order: gravity (its g1, g2 feed compensation), the
+    controller's model, the drive chain (policy → effort limits → motor windings), then the
+    passive forces. `command` is the list the command policies read."""
+    arm, effects = scene.arm, []
+    if scene.gravity != 0.0:
+        effects.append(Gravity(scene.gravity))
+    motors = Motors(**scene.motors) if scene.motors is not None else None
+    windings = motors is not None and motors.windings
+    believed = (ControllerModel(scene.links, scene.gravity, _payload_mass(scene),
+                                **scene.controller_model)
+                if scene.controller_model is not None else None)
+    actuator = _actuator(scene, arm, believed, command, windings)
     if actuator is not None:
+        if believed is not None and actuator.compensates:
+            effects.append(believed)
         effects.append(actuator)
-    if damping != 0.0:
-        effects.append(Damping(damping))
+        if scene.effort_limits is not None:
+            effects.append(EffortLimits(scene.effort_limits))
+    if motors is not None:
+        effects.append(motors)       # armature only: no code; windings: the driver and currents
+    if scene.springs is not None:
+        effects.append(Springs(**scene.springs))
+    if scene.damping != 0.0:
+        effects.append(Damping(scene.damping))
+    if scene.payload is not None:
+        effects.append(Payload(scene.payload["mass"]))
     return effects
+
+
+def _payload_mass(scene) -> float:
+    return scene.payload["mass"] if scene.payload is not None else 0.0
+
+
+def _actuator(scene, arm, believed, command, windings) -> Actuator | None:
+    """The policy's actuator, or None when it applies no torque and no winding needs one."""
+    policy = scene.policy
+    gravity = believed.gravity if believed is not None else scene.gravity
+    if policy in COMPENSATING and gravity == 0.0:   # compensating absent gravity: no torque
+        policy = "zero" if policy == "gravity_compensation" else "command"
+    if policy == "zero" and not windings:
+        return None
+    believed_torque = (believed.gravity_torque if believed is not None
+                       else lambda q: model.gravity_torque(arm, q, gravity))
+    fixed = (tuple(scene.constant_torque) if policy == "constant" else
+             believed_torque(scene.initial_positions) if policy == "frozen_gravity" else None)
+    return Actuator(policy, fixed, command, compensation=believed_torque,
+                    work_kind="transfer" if windings else "input",
+                    believed="gc" if believed is not None else "g")

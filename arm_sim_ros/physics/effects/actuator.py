@@ -2,17 +2,18 @@
 
 Policies: constant τ, gravity compensation g(q) recomputed at every stage, the frozen
 initial gravity torque g(q₀), and command (the latest torque from the topic, held),
-alone or with gravity compensation on top.
+alone or with gravity compensation on top. Compensation uses the true g (the gravity
+effect's g1, g2) unless the scene gives the controller a model of its own (gc1, gc2).
 """
 from __future__ import annotations
 
-from .. import model
 from .base import Channel, Effect
 
 POLICIES = ("zero", "constant", "gravity_compensation", "frozen_gravity", "command",
             "command_gravity_compensation")
 POLICY_TORQUE = {
-    # policy: (torque lines, compensates gravity: needs the stage's g1, g2)
+    # policy: (torque lines, compensates gravity: needs the stage's gravity torque)
+    "zero": ("t1 = 0.0; t2 = 0.0", False),
     "constant": ("t1 = TORQUE1; t2 = TORQUE2", False),
     "frozen_gravity": ("t1 = TORQUE1; t2 = TORQUE2", False),
     "gravity_compensation": ("t1 = g1; t2 = g2", True),
@@ -25,27 +26,17 @@ class Actuator(Effect):
     name = "actuator"
     drives = True
 
-    def __init__(self, policy: str, gravity: float, fixed=None, command=None):
+    def __init__(self, policy: str, fixed=None, command=None, compensation=None,
+                 work_kind: str = "input", believed="g"):
         """`fixed`: the torque of constant and frozen_gravity; `command`: the list the
-        command policies read at every stage (shared with the simulator)."""
-        self.policy, self.gravity, self.fixed = policy, gravity, fixed
+        command policies read at every stage (shared with the simulator); `compensation`:
+        q -> the gravity torque the policy compensates (the believed one); `believed`: the
+        prefix of that torque's names in the code (g, or gc for a controller model)."""
+        self.policy, self.fixed, self.compensation = policy, fixed, compensation
         self.command = command if command is not None else [0.0, 0.0]
-        self.lines, self.compensates = POLICY_TORQUE[policy]
-
-    @classmethod
-    def for_policy(cls, arm, policy: str, gravity: float, constant_torque, initial_positions,
-                   command) -> "Actuator | None":
-        """The actuator a policy needs, or None when it applies no torque at all."""
-        if policy not in POLICIES:
-            raise ValueError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
-        if policy == "zero" or (policy == "gravity_compensation" and gravity == 0.0):
-            return None                      # compensating absent gravity is no torque
-        if policy == "command_gravity_compensation" and gravity == 0.0:
-            policy = "command"
-        fixed = (tuple(constant_torque) if policy == "constant" else
-                 model.gravity_torque(arm, initial_positions, gravity)
-                 if policy == "frozen_gravity" else None)
-        return cls(policy, gravity, fixed, command)
+        lines, self.compensates = POLICY_TORQUE[policy]
+        self.lines = lines.replace("+ g", f"+ {believed}").replace("= g", f"= {believed}")
+        self.work_kind = work_kind   # "transfer" when windings turn electrical input into it
 
     def constants(self, arm) -> dict:
         if self.fixed is None:
@@ -60,14 +51,14 @@ class Actuator(Effect):
                 "f2 += t2"]
 
     def channels(self):
-        return (Channel("work", "t1 * u1 + t2 * u2", "input"),)
+        return (Channel("work", "t1 * u1 + t2 * u2", self.work_kind),)
 
-    def applied_torque(self, arm, q):
-        """τ as the policy applies it at configuration q now."""
+    def requested_torque(self, q):
+        """τₐ as the policy asks for it at configuration q now (before limits and motors)."""
         if self.fixed is not None:
             return self.fixed
         t1, t2 = self.command if self.policy.startswith("command") else (0.0, 0.0)
         if self.compensates:
-            g1, g2 = model.gravity_torque(arm, q, self.gravity)
+            g1, g2 = self.compensation(q)
             t1, t2 = t1 + g1, t2 + g2
         return t1, t2

@@ -10,6 +10,75 @@ f1, f2 (f = τ − c − g − D q̇ …) and solves M a = f at the end.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import isfinite
+
+from ..model import ParameterError
+
+REQUIRED = object()
+CHECKS = {  # check name: (test, what the value must be)
+    "any": (lambda v: True, "finite"),
+    "positive": (lambda v: v > 0, "positive"),
+    "non-negative": (lambda v: v >= 0, "non-negative"),
+}
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One scene key of an effect: `<effect>.<name>` in a scene file, --set and ROS params."""
+
+    name: str
+    kind: str              # "pair" (one value per joint) or "float"
+    unit: str
+    check: str = "any"
+    default: object = REQUIRED
+    description: str = ""
+
+    def coerce(self, effect: str, value):
+        """The value as a float or a pair of floats, or ParameterError saying why."""
+        label = f"{effect}.{self.name}"
+        if self.kind == "pair":
+            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+                raise ParameterError(f"{label} must be a list of two numbers ({self.unit}), "
+                                     f"got {value!r}")
+            if len(value) != 2:
+                raise ParameterError(f"{label} needs two numbers, one per joint ({self.unit}), "
+                                     f"got {len(value)}")
+            return tuple(self._number(f"{label}[{i}]", v) for i, v in enumerate(value))
+        return self._number(label, value)
+
+    def _number(self, label: str, value) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParameterError(f"{label} must be a number ({self.unit}), got {value!r}")
+        try:
+            value = float(value)
+        except OverflowError:
+            value = float("inf")
+        test, what = CHECKS[self.check]
+        if not isfinite(value) or not test(value):
+            raise ParameterError(f"{label} = {value:g} is impossible: it must be {what} "
+                                 f"({self.unit})")
+        return value
+
+
+def validate(effect: str, parameters, mapping) -> dict:
+    """An effect's scene mapping checked against its parameters; defaults filled in."""
+    if not isinstance(mapping, dict):
+        raise ParameterError(f"{effect} must be a mapping of "
+                             f"{', '.join(p.name for p in parameters)}, got {mapping!r}")
+    known = {p.name: p for p in parameters}
+    unknown = sorted(set(map(str, mapping)) - set(known))
+    if unknown:
+        raise ParameterError(f"{effect}.{unknown[0]} is not a key of {effect}; its keys: "
+                             f"{', '.join(known)}")
+    values = {}
+    for name, parameter in known.items():
+        if name in mapping and mapping[name] is not None:
+            values[name] = parameter.coerce(effect, mapping[name])
+        elif parameter.default is REQUIRED:
+            raise ParameterError(f"{effect} needs {effect}.{name} ({parameter.unit})")
+        elif parameter.default is not None:
+            values[name] = parameter.default
+    return values
 
 
 @dataclass(frozen=True)
@@ -30,6 +99,7 @@ class Effect:
 
     name = ""
     drives = False     # an input (the actuator): its force is added before the passive ones
+    state = ()         # names of the extra states it adds (winding currents), initially 0
 
     def constants(self, arm) -> dict:
         """Names the generated code reads; values may be per-arm arrays (Batch)."""
@@ -46,11 +116,20 @@ class Effect:
     def channels(self) -> tuple[Channel, ...]:
         return ()
 
-    def stored_energy(self, arm, q) -> float:
-        """Energy this effect stores at configuration q, counted in E (0 if it stores none)."""
+    def rates(self) -> list[str]:
+        """Expressions of d/dt of its extra states, in `state` order."""
+        return []
+
+    def stored_energy(self, arm, q, extra) -> float:
+        """Energy it stores at configuration q and its extra states, counted in E."""
         return 0.0
 
     def stiffness(self, arm) -> float:
         """The largest decay rate (1/s) it adds on the negative real axis, at any pose: what
-        the sub-step planner keeps h times under the integrator's real stability limit."""
+        the sub-step planner keeps h times under the integrator's stability limit."""
+        return 0.0
+
+    def frequency(self, arm) -> float:
+        """The largest angular frequency (rad/s) of the oscillation it adds, at any pose
+        (springs); nonzero makes the planner use the stability region's half-disk."""
         return 0.0

@@ -23,5 +23,5 @@ class Gravity(Effect):
         return ["f1 -= g1",
                 "f2 -= g2"]
 
-    def stored_energy(self, arm, q) -> float:
+    def stored_energy(self, arm, q, extra) -> float:
         return model.potential_energy(arm, q, self.gravity)

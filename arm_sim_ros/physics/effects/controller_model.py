@@ -1,0 +1,44 @@
+"""The controller's own model of the arm: what the gravity-compensating policies believe.
+
+Scene: `controller_model: {gravity, link_masses, com_distances, link_lengths, payload_mass}`,
+each optional; an unnamed key is the true arm's value. With it, the compensation torque is
+computed from the believed gravity coefficients (its own lines, GC1/GC2), so a controller
+compensating for the wrong payload lets the arm sag exactly as the physics says.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from .. import model
+from .base import Effect, Parameter
+
+
+class ControllerModel(Effect):
+    name = "controller_model"
+    parameters = (
+        Parameter("gravity", "float", "m/s^2", "non-negative", default=None),
+        Parameter("link_masses", "pair", "kg", "positive", default=None),
+        Parameter("com_distances", "pair", "m", default=None),
+        Parameter("link_lengths", "pair", "m", "positive", default=None),
+        Parameter("payload_mass", "float", "kg", "non-negative", default=None),
+    )
+
+    def __init__(self, true_arm, true_gravity: float, true_payload: float = 0.0, **believed):
+        """`true_arm` without its payload; `believed` the keys the controller gets wrong."""
+        self.gravity = believed.pop("gravity", None)
+        self.gravity = true_gravity if self.gravity is None else self.gravity
+        payload = believed.pop("payload_mass", None)
+        payload = true_payload if payload is None else payload
+        arm = replace(true_arm, **{k: v for k, v in believed.items() if v is not None})
+        self.arm = arm.with_payload(payload)
+
+    def constants(self, arm) -> dict:
+        k1, k2 = self.arm.gravity_coefficients
+        return {"GC1": self.gravity * k1, "GC2": self.gravity * k2}
+
+    def terms(self) -> list[str]:
+        return ["gc2 = GC2 * cos(q1 + q2)",
+                "gc1 = GC1 * cos(q1) + gc2"]
+
+    def gravity_torque(self, q):
+        return model.gravity_torque(self.arm, q, self.gravity)

@@ -1,0 +1,122 @@
+"""Geared motors: reflected rotor inertia, and optionally the windings.
+
+Scene: `motors: {gear_ratio: [N1, N2], rotor_inertia: [J1, J2]}` adds Nᵢ²Jᵢ to Mᵢᵢ (the
+diagonal "armature" model of MuJoCo and Drake; folded into the mass matrix's constants, so
+it costs no code) and its kinetic energy counts in E through M.
+
+With `resistance` R, `inductance` L and `torque_constant` k (all three or none) and an
+optional `voltage_limit`, the winding currents i₁, i₂ join the state (initially 0): the
+driver turns the requested joint torque τₐ into Vᵢ = clamp(Rᵢ τₐᵢ / (Nᵢ kᵢ), ±Vlimᵢ), the
+winding obeys Lᵢ diᵢ/dt = Vᵢ − Rᵢ iᵢ − kᵢ Nᵢ q̇ᵢ and the joint receives Nᵢ kᵢ iᵢ. The stored
+½ Lᵢ iᵢ² counts in E; `electrical_input` = ∫Σ Vᵢ iᵢ dt and `copper_loss` = ∫Σ Rᵢ iᵢ² dt.
+"""
+from __future__ import annotations
+
+from ..model import ParameterError
+from ..stability import worst_stiffness
+from .base import Channel, Effect, Parameter
+
+ELECTRICAL = ("resistance", "inductance", "torque_constant")
+
+
+class Motors(Effect):
+    name = "motors"
+    drives = True
+    parameters = (
+        Parameter("gear_ratio", "pair", "1", "positive", description="joint turns N per motor turn"),
+        Parameter("rotor_inertia", "pair", "kg m^2", "non-negative", default=(0.0, 0.0),
+                  description="rotor inertia J on the motor side"),
+        Parameter("resistance", "pair", "ohm", "positive", default=None,
+                  description="winding resistance R"),
+        Parameter("inductance", "pair", "H", "positive", default=None,
+                  description="winding inductance L"),
+        Parameter("torque_constant", "pair", "N m/A", "positive", default=None,
+                  description="torque constant k = back-EMF constant in V s/rad"),
+        Parameter("voltage_limit", "pair", "V", "positive", default=None,
+                  description="driver voltage limit (none = unlimited)"),
+    )
+
+    def __init__(self, gear_ratio, rotor_inertia=(0.0, 0.0), resistance=None, inductance=None,
+                 torque_constant=None, voltage_limit=None):
+        self.gear_ratio, self.rotor_inertia = tuple(gear_ratio), tuple(rotor_inertia)
+        given = [name for name, v in zip(ELECTRICAL, (resistance, inductance, torque_constant))
+                 if v is not None]
+        if given and len(given) != 3:
+            raise ParameterError(f"motors: {', '.join(given)} given without "
+                                 f"{', '.join(n for n in ELECTRICAL if n not in given)}; the "
+                                 "windings need resistance, inductance and torque_constant")
+        if voltage_limit is not None and not given:
+            raise ParameterError("motors.voltage_limit needs the windings (resistance, "
+                                 "inductance, torque_constant)")
+        self.windings = bool(given)
+        self.drives = self.windings      # only the windings stand between policy and joint
+        self.resistance, self.inductance = resistance, inductance
+        self.torque_constant, self.voltage_limit = torque_constant, voltage_limit
+        self.state = ("i1", "i2") if self.windings else ()
+
+    @property
+    def armature(self) -> tuple[float, float]:
+        """Nᵢ² Jᵢ: the rotor inertia as the joint feels it."""
+        return tuple(n * n * j for n, j in zip(self.gear_ratio, self.rotor_inertia))
+
+    def constants(self, arm) -> dict:
+        if not self.windings:
+            return {}
+        out = {}
+        for i in (0, 1):
+            n, r, l, k = (self.gear_ratio[i], self.resistance[i], self.inductance[i],
+                          self.torque_constant[i])
+            j = i + 1
+            out |= {f"DRIVE{j}": r / (n * k), f"RES{j}": r, f"INV_IND{j}": 1.0 / l,
+                    f"KN{j}": k * n}
+            if self.voltage_limit is not None:
+                out[f"VLIM{j}"] = self.voltage_limit[i]
+        return out
+
+    def terms(self) -> list[str]:
+        if not self.windings:
+            return []
+        lines = []
+        for j in (1, 2):
+            volts = f"DRIVE{j} * t{j}"
+            if self.voltage_limit is not None:
+                volts = f"MIN(MAX({volts}, -VLIM{j}), VLIM{j})"
+            lines += [f"v{j} = {volts}",
+                      f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
+                      f"t{j} = KN{j} * i{j}"]
+        return lines
+
+    def rates(self) -> list[str]:
+        return ["di1", "di2"] if self.windings else []
+
+    def channels(self):
+        if not self.windings:
+            return ()
+        return (Channel("electrical_input", "v1 * i1 + v2 * i2", "input"),
+                Channel("copper_loss", "RES1 * i1 * i1 + RES2 * i2 * i2", "loss"))
+
+    def stored_energy(self, arm, q, extra) -> float:
+        if not self.windings:
+            return 0.0
+        return 0.5 * (self.inductance[0] * extra[0] ** 2 + self.inductance[1] * extra[1] ** 2)
+
+    def stiffness(self, arm) -> float:
+        if not self.windings:
+            return 0.0
+        # The winding's own pole −R/L, plus the electrical braking (kN)²/R it puts on the
+        # joint (what a slow winding becomes: a damper), both real and negative.
+        electrical = max(r / l for r, l in zip(self.resistance, self.inductance))
+        braking = max((k * n) ** 2 / r for k, n, r in
+                      zip(self.torque_constant, self.gear_ratio, self.resistance))
+        return electrical + braking * worst_stiffness(arm)
+
+    def frequency(self, arm) -> float:
+        if not self.windings:
+            return 0.0
+        # Winding and inertia exchange energy: an oscillation at most sqrt((kN)² Λ / L).
+        return max(k * n * (worst_stiffness(arm) / l) ** 0.5 for k, n, l in
+                   zip(self.torque_constant, self.gear_ratio, self.inductance))
+
+    def joint_torque(self, extra) -> tuple[float, float]:
+        """What the joints receive from the windings' currents."""
+        return tuple(k * n * i for k, n, i in zip(self.torque_constant, self.gear_ratio, extra))
