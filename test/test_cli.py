@@ -22,11 +22,15 @@ def run_cli(capsys, *argv):
     return code, out, err
 
 
-def test_scenes_lists_the_seven_presets_with_descriptions(capsys):
+EFFECT_PRESETS = {"per_joint_damping", "springs_oscillation", "payload_release", "geared_release",
+                  "motor_windings_hold", "effort_limited_hold", "wrong_payload_model", "geared_arm"}
+
+
+def test_scenes_lists_the_explainers_seven_and_the_effect_presets_with_descriptions(capsys):
     code, out, _ = run_cli(capsys, "scenes")
     assert code == 0
-    assert set(preset_names()) == PRESETS
-    for name in PRESETS:
+    assert set(preset_names()) == PRESETS | EFFECT_PRESETS
+    for name in PRESETS | EFFECT_PRESETS:
         line = next(l for l in out.splitlines() if l.split()[0] == name)
         assert load_scene(name).description in line
 

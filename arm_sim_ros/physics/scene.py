@@ -11,8 +11,7 @@ from dataclasses import dataclass, fields, replace as dataclass_replace
 from math import isfinite
 from pathlib import Path
 
-import yaml
-
+from .. import yaml_files
 from .effects import MAPPING_EFFECTS, POLICIES, EffortLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
@@ -180,8 +179,11 @@ def coerce_value(name: str, kind: str, value):
             raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
         return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{name} must be a number, got {value!r}")
-    value = float(value)
+        raise SceneError(f"{name} must be a number, got {str(value)[:60]!r}")
+    try:
+        value = float(value)
+    except OverflowError:
+        raise SceneError(f"{name} = {str(value)[:20]}... is beyond the largest double") from None
     if not isfinite(value):
         raise SceneError(f"{name} = {value} is not finite")
     return value
@@ -241,15 +243,30 @@ def preset_names() -> list[str]:
 
 
 def load_scene(name: str = "release") -> Scene:
+    """A preset by name, or a scene file by path (anything ending in .yaml/.yml or with a
+    directory in it); the preset directories are searched in scene_dirs() order."""
+    if name.endswith((".yaml", ".yml")) or os.sep in name:
+        path = Path(name)
+        if not path.is_file():
+            raise SceneError(f"scene file {name} does not exist")
+        return scene_from_file(path, path.stem)
     for directory in scene_dirs():
         path = directory / f"{name}.yaml"
         if path.is_file():
-            data = yaml.safe_load(path.read_text()) or {}
-            if not isinstance(data, dict):
-                raise SceneError(f"scene file {path} must hold a mapping of keys to values")
-            try:
-                return Scene(name=name).replace(**data)
-            except SceneError as error:
-                raise SceneError(f"scene {name!r} ({path}): {error}") from None
+            return scene_from_file(path, name)
     known = ", ".join(preset_names()) or "none found"
-    raise SceneError(f"unknown scene {name!r}; presets: {known}")
+    raise SceneError(f"unknown scene {name!r}; presets: {known} (or give a path to a .yaml file)")
+
+
+def scene_from_file(path: Path, name: str) -> Scene:
+    try:
+        data = yaml_files.load(path, "scene file")
+    except yaml_files.YamlFileError as error:
+        raise SceneError(str(error)) from None
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise SceneError(f"scene file {path} must hold a mapping of keys to values")
+    try:
+        return Scene(name=name).replace(**data)
+    except SceneError as error:
+        raise SceneError(f"scene {name!r} ({path}): {error}") from None

@@ -13,7 +13,8 @@ def scene_from_args(args) -> Scene:
 
 
 def add_scene_arguments(parser) -> None:
-    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`)")
+    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`) or a scene .yaml file")
     parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="override a scene key, e.g. gravity=0 or constant_torque=1,0")
+                        help="override a scene key, e.g. gravity=0, constant_torque=1,0 or "
+                             "springs.stiffness=20,5")

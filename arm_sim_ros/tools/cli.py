@@ -98,14 +98,19 @@ def format_result(scene: Scene, r: dict) -> str:
     def pair(v):
         return "(" + ", ".join(f"{x:.6f}" for x in v) + ")"
 
+    currents = [f"{name} = {r[name]:.6f} A" for name in ("i1", "i2") if name in r]
+    others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
+              if name not in ("work", "dissipated")]
     return "\n".join([
         f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.integrator}",
         f"t = {r['t']:.6f} s",
         f"q = {pair(r['q'])} rad",
         f"qd = {pair(r['qd'])} rad/s",
+        *([", ".join(currents)] if currents else []),
         f"tau = {pair(r['tau'])} N m",
         f"kinetic {r['kinetic']:.9f} J, potential {r['potential']:.9f} J, total {r['total']:.9f} J",
         f"actuator work {r['work']:.9f} J, dissipated {r['dissipated']:.9f} J",
+        *([", ".join(others)] if others else []),
         f"balance residual {r['residual']:.3e} J, max |residual| over the run "
         f"{r['max_abs_energy_drift']:.9f} J",
     ])

@@ -1,0 +1,85 @@
+"""YAML files as people write them: YAML 1.2 numbers, no aliases, one clear error line.
+
+PyYAML reads YAML 1.1, where `1e-3` (no dot) is text; YAML 1.2 and ROS 2's parameter
+parser read it as a number, and so do we. Anchors and aliases are refused outright: a
+scene or parameter file never needs them, and a 700-byte alias bomb expands to gigabytes.
+"""
+from __future__ import annotations
+
+import re
+
+import yaml
+
+from .usage import UsageError
+
+MAX_FILE_BYTES = 1_000_000
+
+# YAML 1.2 core schema floats: 1e-3, 1E3, .5, -2.5e+4, .inf, .nan.
+FLOAT_1_2 = re.compile(r"""^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?
+                          |[-+]?[0-9]+[eE][-+]?[0-9]+
+                          |[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$""", re.X)
+
+
+class YamlFileError(UsageError):
+    """A YAML file that cannot be read as data; the message names the file and the place."""
+
+
+class _Loader(yaml.SafeLoader):
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(None, None, "aliases (*name) are not allowed",
+                                              event.start_mark)
+        return super().compose_node(parent, index)
+
+
+_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+for first in "-+.0123456789":
+    _Loader.yaml_implicit_resolvers[first] = [
+        (tag, regexp) for tag, regexp in _Loader.yaml_implicit_resolvers.get(first, [])
+        if tag != "tag:yaml.org,2002:float"]
+    _Loader.yaml_implicit_resolvers[first].insert(0, ("tag:yaml.org,2002:float", FLOAT_1_2))
+
+
+def loads(text: str, what: str):
+    """Data from YAML text; YamlFileError naming `what` and the line for anything wrong."""
+    try:
+        return yaml.load(text, Loader=_Loader)   # noqa: S506 (a SafeLoader)
+    except yaml.MarkedYAMLError as error:
+        mark = error.problem_mark or error.context_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise YamlFileError(f"{what} is not valid YAML{where}: {error.problem or error.context}") \
+            from None
+    except (yaml.YAMLError, RecursionError) as error:
+        raise YamlFileError(f"{what} is not valid YAML: {type(error).__name__}") from None
+
+
+def load(path, what: str = "file"):
+    """Data from a YAML file (at most MAX_FILE_BYTES), string keys only in mappings."""
+    try:
+        with open(path, "rb") as file:
+            raw = file.read(MAX_FILE_BYTES + 1)
+    except OSError as error:
+        raise YamlFileError(f"cannot read {what} {path}: {error.strerror}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise YamlFileError(f"{what} {path} is larger than {MAX_FILE_BYTES} bytes")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise YamlFileError(f"{what} {path} is not UTF-8 text") from None
+    data = loads(text, f"{what} {path}")
+    _check_keys(data, f"{what} {path}")
+    return data
+
+
+def _check_keys(data, what: str, depth: int = 0) -> None:
+    if depth > 50:
+        raise YamlFileError(f"{what} nests deeper than 50 levels")
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if not isinstance(key, str):
+                raise YamlFileError(f"{what}: key {str(key)[:40]!r} is not text")
+            _check_keys(value, what, depth + 1)
+    elif isinstance(data, list):
+        for value in data:
+            _check_keys(value, what, depth + 1)
