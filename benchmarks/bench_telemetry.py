@@ -2,7 +2,7 @@
 the node and `arm-sim run --rerun` take, each side by side with the same loop bare:
 
 - node: ArmSimCore.tick() (no transport) at 100 Hz (10 steps per tick) and 1 kHz (1 step
-  per tick); with telemetry the node hands the states of every node_core.RECORD_EVERY
+  per tick); with telemetry the node hands the states of every recorder_link.RECORD_EVERY
   steps to RerunRecorder.step_batch() in one call;
 - arm-sim run: cli.run_recorded() (Simulator.run, which also tracks the largest residual),
   bare and with the recorder the --rerun flag builds (step_batch every 1000 steps);
@@ -38,7 +38,7 @@ import rerun as rr
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics import model
 from arm_sim_ros.node import core as node_core, parameters
-from arm_sim_ros.recording import telemetry
+from arm_sim_ros.recording import blueprint, readouts, telemetry, writer
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -131,7 +131,7 @@ def per_sample(scene, steps, path):
     """One rr.log per channel per step, as a first version of the sink would do it."""
     sim = Simulator(scene)
     arm, gravity = sim.arm, scene.gravity
-    every = round(telemetry.FRAME_PERIOD / scene.step_size)
+    every = round(writer.FRAME_PERIOD / scene.step_size)
     dissipated = 4 + sim.channels.index("dissipated") if "dissipated" in sim.channels else None
     with Clocks() as clocks:
         stream = rr.RecordingStream("arm_sim_bench")
@@ -143,7 +143,7 @@ def per_sample(scene, steps, path):
             q, qd = (y[0], y[1]), (y[2], y[3])
             kinetic = model.kinetic_energy(arm, q, qd)
             potential = model.potential_energy(arm, q, gravity)
-            stream.set_time(telemetry.TIMELINE, duration=sim.time)
+            stream.set_time(blueprint.TIMELINE, duration=sim.time)
             stream.log("energy/kinetic", rr.Scalars(kinetic))
             stream.log("energy/potential", rr.Scalars(potential))
             stream.log("energy/total", rr.Scalars(kinetic + potential))
@@ -190,7 +190,7 @@ def energies_scalar(states, arm, gravity):
 def energies_vectorised(states, arm, gravity):
     start = time.perf_counter()
     array = np.array(states)
-    kinetic, potential = telemetry.energies(arm, gravity, *array[:, :4].T)
+    kinetic, potential = readouts.energies(arm, gravity, *array[:, :4].T)
     kinetic + potential
     return time.perf_counter() - start
 

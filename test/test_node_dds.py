@@ -19,7 +19,7 @@ from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_typestore
 
 from arm_sim_ros import interface
-from arm_sim_ros.node import core as node_core, parameters as node_params, messages as msg, transports
+from arm_sim_ros.node import commands as node_commands, core as node_core, parameters as node_params, messages as msg, transports
 from arm_sim_ros.node.main import load_params_file, main as node_main, node_parameters, parse_ros_args
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from node_oracle import assert_matches, expected_states
@@ -144,7 +144,7 @@ def test_warnings_are_rate_limited_then_report_what_was_held_back(caplog):
     with caplog.at_level(logging.WARNING):
         for _ in range(5):
             core.on_command([1.0])
-        clock.now += node_core.WARN_PERIOD
+        clock.now += node_commands.WARN_PERIOD
         core.on_command([math.inf, 0.0])
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warnings) == 2

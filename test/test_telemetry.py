@@ -17,7 +17,7 @@ import rerun as rr
 
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics import model
-from arm_sim_ros.recording import telemetry
+from arm_sim_ros.recording import blueprint, readouts, sinks, telemetry, writer
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.node import parameters as node_params
@@ -199,8 +199,8 @@ def test_series_are_named_and_coloured(tmp_path):
 def test_series_names_use_only_glyphs_the_viewer_can_draw():
     """The viewer's font lacks e.g. ᵀ, and a missing glyph crashes it (seen in 0.41)."""
     drawn = set("∫τ·²₀−") | {"\u0307"}      # each seen rendered in a headless screenshot
-    names = [name for name, _ in telemetry.ENERGY_SERIES.values()]
-    names += [n for title, series in telemetry.JOINT_SERIES.values() for n in (title, *series)]
+    names = [name for name, _ in blueprint.ENERGY_SERIES.values()]
+    names += [n for title, series in blueprint.JOINT_SERIES.values() for n in (title, *series)]
     for name in names:
         assert set(name) <= drawn | {chr(c) for c in range(32, 127)}, name
 
@@ -210,7 +210,7 @@ def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
                                           link_lengths=(0.8, 1.2), com_distances=(0.4, 0.5))
     samples, _ = record(scene, tmp_path / "drawn.rrd")
     columns = read_back(tmp_path / "drawn.rrd")
-    every = round(telemetry.FRAME_PERIOD / scene.step_size)
+    every = round(writer.FRAME_PERIOD / scene.step_size)
     frames = samples[::every]
     assert columns["arm/links"]["sim_time"] == [round(s.t * 1e9) for s in frames]
     for sample, strips, joints in zip(frames, columns["arm/links"]["LineStrips2D:strips"],
@@ -366,15 +366,15 @@ def test_spawning_without_a_display_is_one_warning(monkeypatch):
 
 
 def test_viewer_addresses():
-    assert telemetry.viewer_url("9876") == "rerun+http://127.0.0.1:9876/proxy"
-    assert telemetry.viewer_url("host:1234") == "rerun+http://host:1234/proxy"
-    assert telemetry.viewer_url("rerun+http://h:1/proxy") == "rerun+http://h:1/proxy"
+    assert sinks.viewer_url("9876") == "rerun+http://127.0.0.1:9876/proxy"
+    assert sinks.viewer_url("host:1234") == "rerun+http://host:1234/proxy"
+    assert sinks.viewer_url("rerun+http://h:1/proxy") == "rerun+http://h:1/proxy"
     with socket.socket() as server:
         server.bind(("127.0.0.1", 0))
         server.listen()
-        url = telemetry.viewer_url(str(server.getsockname()[1]))
-        assert telemetry.viewer_reachable(url)
-    assert not telemetry.viewer_reachable(url)
+        url = sinks.viewer_url(str(server.getsockname()[1]))
+        assert sinks.viewer_reachable(url)
+    assert not sinks.viewer_reachable(url)
 
 
 def test_vectorised_helpers_equal_the_models_scalar_functions():
@@ -382,9 +382,9 @@ def test_vectorised_helpers_equal_the_models_scalar_functions():
                               com_distances=(0.3, 0.9), com_inertias=(0.05, 0.2))
     rng = np.random.default_rng(4)
     q1, q2, u1, u2 = rng.uniform(-7.0, 7.0, size=(4, 500))
-    kinetic, potential = telemetry.energies(arm, 9.81, q1, q2, u1, u2)
-    torques = telemetry.gravity_torques(arm, 9.81, q1, q2)
-    elbow, tip = telemetry.drawing_points(arm, q1, q2)
+    kinetic, potential = readouts.energies(arm, 9.81, q1, q2, u1, u2)
+    torques = readouts.gravity_torques(arm, 9.81, q1, q2)
+    elbow, tip = readouts.drawing_points(arm, q1, q2)
     for i in range(500):
         q, qd = (q1[i], q2[i]), (u1[i], u2[i])
         scale = 1.0 + abs(model.kinetic_energy(arm, q, qd))

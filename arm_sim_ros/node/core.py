@@ -1,48 +1,24 @@
-"""The `arm_sim` node without a transport: parameters, timer stepping, commands, JointState
-and diagnostics. The rclpy and dds transports call into this; it imports neither.
+"""The `arm_sim` node without a transport: timer stepping, JointState and diagnostics, over
+the parameters (parameters.py), the command intake (commands.py) and the recorder
+(recorder_link.py). The rclpy and dds transports call into this; it imports neither.
 
 Time: each tick advances exactly `steps_per_tick` RK4 steps of `step_size`, so simulated time
 is always steps x step_size whether ticks come early, late or as fast as possible. Stamps are
 the wall time at start plus simulated time, so a recording's stamps advance by exactly
-1/publish_rate. The command timeout is measured on the simulation clock (deterministic, and
-the same as wall time at real_time_factor 1).
+1/publish_rate.
 """
 from __future__ import annotations
 
 import time
 from math import isfinite
 
-from ..interface import COMMAND_TOPIC, ERROR, NODE_NAME, OK, WARN
+from ..interface import ERROR, NODE_NAME, OK, WARN
 from ..physics.simulator import Simulator
+from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
 from .parameters import SCENE_PARAMETERS, SPECS, NodeConfig
+from .recorder_link import RecorderLink, make_recorder
 
-COMMAND_POLICIES = ("command", "command_gravity_compensation")
-# Steps collected before the recorder gets them in one call: 0.1 s behind at the default one
-# step a tick; collecting 50 measured slower than 10 (the kept states fall out of cache).
-RECORD_EVERY = 10
-WARN_PERIOD = 1.0                 # seconds between repeated warnings of one kind
-
-
-class RateLimitedLog:
-    """At most one line per kind per WARN_PERIOD; the next says how many were held back."""
-
-    def __init__(self, log, clock=time.monotonic):
-        self.log, self.clock = log, clock
-        self._last, self._held = {}, {}
-
-    def warning(self, kind: str, text: str) -> None:
-        now = self.clock()
-        last = self._last.get(kind)
-        if last is not None and now - last < WARN_PERIOD:
-            self._held[kind] = self._held.get(kind, 0) + 1
-            return
-        held = self._held.pop(kind, 0)
-        self._last[kind] = now
-        self.log.warning(text + (f" ({held} more like this since the last warning)" if held else ""))
-
-
-# --- the node's behaviour -----------------------------------------------------------------------
 
 class ArmSimCore:
     """Simulator + command handling + message assembly; transports call in, never the reverse."""
@@ -51,30 +27,27 @@ class ArmSimCore:
                  start_stamp_ns: int | None = None, recorder=None):
         self.log = log
         self.wall_clock = wall_clock
-        self.warnings = RateLimitedLog(log, wall_clock)
         self.start_stamp_ns = time.time_ns() if start_stamp_ns is None else start_stamp_ns
-        self.received_commands = 0
-        self.refused_commands = 0
+        self.commands = CommandIntake(log, RateLimitedLog(log, wall_clock))
         self.late_ticks = 0
-        self.command_timeouts = 0
-        self.recorder = None
-        self._unrecorded = []             # states of steps the recorder has not seen yet
         self._elapsed_before_reset_ns = 0
         self._configure(config)
-        self._attach(recorder if recorder is not None else self._make_recorder())
-        self._event(f"scene {self.config.scene.name} started: policy {self.config.scene.policy}, "
-                    f"h = {self.config.scene.step_size:g} s, {self.config.steps_per_tick} steps per tick")
+        self.recorder = RecorderLink(log, recorder if recorder is not None
+                                     else make_recorder(config, log), self.sim)
+        self._event(f"scene {config.scene.name} started: policy {config.scene.policy}, "
+                    f"h = {config.scene.step_size:g} s, {config.steps_per_tick} steps per tick")
 
-    # configuration ---------------------------------------------------------------------------
+    received_commands = property(lambda self: self.commands.received)
+    refused_commands = property(lambda self: self.commands.refused)
+    command_timeouts = property(lambda self: self.commands.timeouts)
+    command = property(lambda self: self.commands.value)
 
     def _configure(self, config: NodeConfig) -> None:
         self.config = config
         self.sim = Simulator(config.scene)
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
-        self.listens = config.scene.policy in COMMAND_POLICIES
-        self.command = (0.0, 0.0)
-        self.command_received_at = None     # simulated time of the last good command
+        self.commands.restart()
         self.held = False                   # integration left the finite numbers; holding
         self.max_abs_residual = 0.0
         self._last_tick_wall = None
@@ -94,105 +67,36 @@ class ArmSimCore:
         else:
             self.config = config
         if any(n.startswith("rerun_") for n in changed):
-            self.finish()
-            self._attach(self._make_recorder())
+            self.recorder.finish()
+            self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim)
         return changed
-
-    def _make_recorder(self):
-        if not self.config.telemetry_enabled:
-            return None
-        v = self.config.values
-        try:
-            from ..recording.telemetry import make_recorder  # heavy (rerun); only when asked for
-            return make_recorder(self.config.scene, path=v["rerun_path"] or None,
-                                 spawn=v["rerun_spawn"], connect=v["rerun_connect"] or None,
-                                 warn=self.log.warning)
-        except Exception as error:  # telemetry must never stop the simulation
-            self.log.error(f"Rerun telemetry is off: {error}")
-            return None
-
-    def _attach(self, recorder) -> None:
-        self.recorder = recorder
-        self._call_recorder("start", self.sim)
-
-    def _call_recorder(self, method: str, *args) -> None:
-        if self.recorder is None:
-            return
-        if self._unrecorded and method != "step_batch":
-            self._hand_over()             # the steps first, then what came after them
-        try:
-            getattr(self.recorder, method)(*args)
-        except Exception as error:  # a failing sink is dropped, the simulation goes on
-            self.log.error(f"Rerun telemetry failed in {method}() and is now off: {error}")
-            self.recorder = None
 
     def _event(self, text: str) -> None:
         self.log.info(text)
-        self._call_recorder("event", text)
-
-    # commands --------------------------------------------------------------------------------
+        self.recorder.event(text)
 
     def on_command(self, data) -> str | None:
         """Take [tau1, tau2] from joint_torque_commands; returns the refusal reason, if any."""
-        self.received_commands += 1
-        reason = self._refusal(data)
+        reason, command = self.commands.take(data, self.config.scene.policy,
+                                             self.config.values["torque_limit"], self.sim.time)
         if reason is not None:
-            self.refused_commands += 1
-            self.warnings.warning("refused", f"refused torque command: {reason}; holding "
-                                  f"{list(self.command)} (refused so far: {self.refused_commands})")
-            self._call_recorder("event", f"refused command: {reason}")
-            return reason
-        if not self.listens:
-            self.warnings.warning("ignored", f"policy {self.config.scene.policy!r} ignores "
-                                  f"{COMMAND_TOPIC}; set policy to command to drive the arm")
-            return None
-        if self.command_received_at is None:
-            self.log.info(f"torque command {list(data)} N m, held until the next one")
-        self.command = (float(data[0]), float(data[1]))
-        self.command_received_at = self.sim.time
-        self._set_command(*self.command)
-        return None
+            self.recorder.event(f"refused command: {reason}")
+        elif command is not None:
+            self._set_command(*command)
+        return reason
 
     def _set_command(self, tau1: float, tau2: float) -> None:
         """Hold a new command; the steps taken under the old one reach the recorder first."""
-        self._hand_over()
+        self.recorder.hand_over()
         self.sim.set_command(tau1, tau2)
-
-    def _refusal(self, data) -> str | None:
-        try:
-            values = [float(v) for v in data]
-        except (TypeError, ValueError):
-            return f"data {data!r} is not a list of numbers"
-        if len(values) != 2:
-            return f"data has {len(values)} values; expected 2 ([tau1, tau2] in N m)"
-        for i, tau in enumerate(values):
-            if not isfinite(tau):
-                return f"tau{i + 1} = {tau} is not finite"
-        limit = self.config.values["torque_limit"]
-        for i, tau in enumerate(values):
-            if abs(tau) > limit:
-                return f"|tau{i + 1}| = {abs(tau):g} N m exceeds torque_limit {limit:g} N m"
-        return None
-
-    def _check_timeout(self) -> None:
-        timeout = self.config.values["command_timeout"]
-        if (timeout > 0 and self.command_received_at is not None
-                and self.sim.time - self.command_received_at >= timeout - 1e-12):
-            self.command_received_at = None
-            self.command_timeouts += 1
-            if self.command != (0.0, 0.0):
-                self.command = (0.0, 0.0)
-                self._set_command(0.0, 0.0)
-                self.log.warning(f"no torque command for {timeout:g} s: torque dropped to zero")
-                self._call_recorder("event", "command timeout: torque dropped to zero")
-
-    # stepping ---------------------------------------------------------------------------------
 
     def tick(self, wall_now: float | None = None) -> JointStateData:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish."""
         self._note_lateness(self.wall_clock() if wall_now is None else wall_now)
         if not self.held:
-            self._check_timeout()
+            if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
+                self._set_command(0.0, 0.0)
+                self.recorder.event("command timeout: torque dropped to zero")
             self._advance()
         return self.joint_state()
 
@@ -205,45 +109,18 @@ class ArmSimCore:
     def _advance(self) -> None:
         sim = self.sim
         before = (sim.state, sim.steps)
-        self._step_recorded(sim, self.config.steps_per_tick)
+        self.recorder.step(self.config.steps_per_tick)
         if sim.holding or not all(isfinite(v) for v in sim.state):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
-            self._hand_over()
+            self.recorder.hand_over()
             sim.state, sim.steps = before
             self.held = True
             self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
                            f"{sim.time:.6f} s); holding until reset")
-            self._call_recorder("event", "integration not finite: holding")
+            self.recorder.event("integration not finite: holding")
             return
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
-
-    def _step_recorded(self, sim, steps: int) -> None:
-        """`steps` physics steps, each seen by the recorder: their states collected and
-        handed over in one step_batch(sim, states) call per RECORD_EVERY steps when it has
-        one (a Python call per step, or per tick at one step a tick, costs more than
-        logging's 10 % budget), else step(sim) after every step. Anything else sent to the
-        recorder, a new command or a restart hands the collected steps over first."""
-        advance, recorder = sim.step, self.recorder
-        if recorder is None:
-            for _ in range(steps):
-                advance()
-        elif hasattr(recorder, "step_batch"):
-            keep = self._unrecorded.append
-            for _ in range(steps):
-                advance()
-                keep(sim.state)
-            if len(self._unrecorded) >= RECORD_EVERY:
-                self._hand_over()
-        else:
-            for _ in range(steps):
-                advance()
-                self._call_recorder("step", sim)
-
-    def _hand_over(self) -> None:
-        states, self._unrecorded = self._unrecorded, []
-        if states:
-            self._call_recorder("step_batch", self.sim, states)
 
     def _step_ns(self) -> int:
         return round(self.sim.step_size * 1e9)
@@ -252,8 +129,10 @@ class ArmSimCore:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * self._step_ns()
 
     def joint_state(self) -> JointStateData:
+        """Positions, velocities and the torque the joints receive (after gearing, windings
+        and effort limits: what a joint torque sensor would read)."""
         y = self.sim.state
-        tau = self.sim.dynamics.applied_torque((y[0], y[1]))
+        tau = self.sim.joint_torque(y)
         return JointStateData(self.stamp_ns(), self.config.values["frame_id"],
                               self.config.values["joint_names"], [y[0], y[1]], [y[2], y[3]],
                               [float(tau[0]), float(tau[1])])
@@ -263,17 +142,14 @@ class ArmSimCore:
         self._restart(self.config, "reset to the scene's initial state")
 
     def _restart(self, config: NodeConfig, why: str) -> None:
-        self._hand_over()                 # they belong to the simulator about to go
+        self.recorder.hand_over()         # they belong to the simulator about to go
         self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
         self._configure(config)
-        self._call_recorder("start", self.sim)
+        self.recorder.start(self.sim)
         self._event(why)
 
     def finish(self) -> None:
-        self._call_recorder("finish", self.sim)
-        self.recorder = None
-
-    # diagnostics ------------------------------------------------------------------------------
+        self.recorder.finish()
 
     def real_time_factor(self, wall_now: float) -> float:
         wall = wall_now - self._diag_wall
@@ -281,8 +157,7 @@ class ArmSimCore:
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
-        sub-steps and refused steps.
-        Rates are over the interval since the previous call."""
+        sub-steps and refused steps. Rates are over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf = self.real_time_factor(wall_now)
         new_refused = self.refused_commands - self._refused_at_last_diag

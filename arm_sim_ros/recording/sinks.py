@@ -1,0 +1,84 @@
+"""Where a Rerun recording goes: a .rrd file, a viewer spawned for it, a viewer already
+running at an address. A sink that cannot open is one warning and is skipped; the
+simulation runs on.
+"""
+from __future__ import annotations
+
+import os
+import socket
+import sys
+from urllib.parse import urlsplit
+
+import rerun as rr
+
+DEFAULT_PORT = 9876
+
+
+def viewer_url(address: str) -> str:
+    """`host:port`, `rerun+http://host:port/proxy` or a bare port -> the gRPC URL rerun takes."""
+    text = address.strip()
+    if text.isdigit():
+        text = f"127.0.0.1:{text}"
+    if "://" not in text:
+        text = f"rerun+http://{text}/proxy"
+    return text
+
+
+def viewer_reachable(url: str, timeout: float = 0.5) -> bool:
+    """A quick TCP check: rerun's own connect blocks ~5 s and then drops data silently."""
+    parts = urlsplit(url)
+    try:
+        with socket.create_connection((parts.hostname or "127.0.0.1", parts.port or DEFAULT_PORT),
+                                      timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def open_sinks(stream, board, opened: list, warn_once, path=None, spawn=False,
+               connect=None) -> bool:
+    """Open the sinks asked for on `stream` with `board` as the default blueprint; True when
+    any opened. A description of each sink that opens is appended to `opened`; each failure
+    is warn_once(key, message), key "file", "spawn" or "connect", and that sink is skipped."""
+    sinks = []
+    if path:
+        try:
+            open(path, "wb").close()
+            sinks.append(rr.FileSink(str(path)))
+            opened.append(f"file {path}")
+        except OSError as error:
+            warn_once("file", f"rerun: cannot write {path} ({error.strerror}); "
+                              "the simulation runs on without that recording")
+    if spawn:
+        _spawn_viewer(stream, sinks, opened, warn_once)
+    if connect:
+        url = viewer_url(connect)
+        if viewer_reachable(url):
+            sinks.append(rr.GrpcSink(url))
+            opened.append(f"viewer {url}")
+        else:
+            warn_once("connect", f"rerun: no viewer answers at {url}; running on "
+                                 "without it (start `rerun` first)")
+    if sinks:
+        rr.set_sinks(*sinks, default_blueprint=board, recording=stream)
+    return bool(sinks)
+
+
+def _spawn_viewer(stream, sinks, opened, warn_once) -> None:
+    """A viewer on DEFAULT_PORT; rerun only logs when one fails to come up, so check."""
+    url = viewer_url(str(DEFAULT_PORT))
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        warn_once("spawn", "rerun: no display to spawn a viewer on (DISPLAY is unset); "
+                           "running on without it")
+        return
+    try:
+        rr.spawn(port=DEFAULT_PORT, connect=False, recording=stream)
+    except Exception as error:
+        warn_once("spawn", f"rerun: cannot spawn a viewer ({error}); running on")
+        return
+    if not viewer_reachable(url):
+        warn_once("spawn", "rerun: the spawned viewer did not come up; running on without it")
+        return
+    sinks.append(rr.GrpcSink(url))
+    opened.append("spawned viewer")
