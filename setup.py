@@ -31,10 +31,13 @@ setup(
         "cyclonedds==11.0.1",
         "rerun-sdk==0.41.0",
         "rosbags==0.11.9",
+        "scipy==1.17.1",         # the accuracy study's reference solutions
+        "matplotlib==3.11.2",    # the accuracy study's plot
+        "tqdm==4.70.1",          # progress on a terminal
     ],
     extras_require={
-        "test": ["pytest==9.0.3", "hypothesis==6.155.2", "scipy==1.17.1"],
-        "bench": ["scipy==1.17.1", "matplotlib==3.11.2", "mujoco==4.0.0"],
+        "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
+        "bench": ["mujoco==4.0.0"],
     },
     zip_safe=True,
     maintainer="arm_sim_ros developers",

@@ -43,11 +43,11 @@ def read_bag(path):
     return messages, connections
 
 
-def run_bag(capsys, tmp_path, *argv):
+def run_bag(capsys, tmp_path, *argv, exit_code=0):
     path = tmp_path / "bag"
     code = cli.main(["run", *argv, "--bag", str(path)])
     _, err = capsys.readouterr()
-    assert code == 0, err
+    assert code == exit_code, err
     return path
 
 
@@ -144,7 +144,8 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
 
 
 def test_run_bag_records_only_finite_values_and_reports_a_refused_step(capsys, tmp_path):
-    path = run_bag(capsys, tmp_path, "--set", "initial_velocities=1e200,1e200", "--duration", "1")
+    path = run_bag(capsys, tmp_path, "--set", "initial_velocities=1e200,1e200", "--duration", "1",
+                   exit_code=1)                     # a run that faulted says so
     messages, _ = read_bag(path)
     for _, message, _ in messages["/joint_states"]:
         assert np.isfinite([*message.position, *message.velocity, *message.effort]).all()

@@ -40,7 +40,8 @@ def test_run_json_has_the_documented_keys_and_values(capsys):
     assert code == 0
     result = json.loads(out)
     assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
-                           "channels", "residual", "max_abs_energy_drift"}
+                           "channels", "residual", "max_abs_energy_drift", "fault",
+                           "refused_steps", "interrupted_at"}
     assert result["channels"] == {}          # the release has no actuator and no damping
     assert result["t"] == 0.5
     assert [f"{x:.6f}" for x in result["q"]] == ["-1.122654", "0.593820"]
@@ -98,7 +99,10 @@ def test_csv_has_initial_row_plus_one_per_step(capsys, tmp_path):
     (["run", "--set", "policy=teleport"], "policy 'teleport' is unknown"),
     (["run", "--set", "damping=-1"], "would add energy"),
     (["run", "--set", "initial_positions=1e300,0"], "initial_positions = [1e+300, 0.0] is beyond 1e+06 rad"),
-    (["run", "--csv", "/nonexistent-dir/x.csv"], "cannot write --csv"),
+    (["run", "--csv", "/nonexistent-dir/x.csv"], "--csv /nonexistent-dir/x.csv: the directory /nonexistent-dir does not exist"),
+    (["run", "--rerun", "/nonexistent-dir/x.rrd"], "the directory /nonexistent-dir does not exist"),
+    (["run", "--rerun", "x.txt"], "--rerun x.txt: the name must end in .rrd"),
+    (["run", "--publish-rate", "50"], "--publish-rate sets the JointState rate of a --bag recording"),
     (["frobnicate"], "invalid choice"),
 ])
 def test_bad_input_is_one_line_on_stderr_with_exit_code_2(capsys, argv, fragment):

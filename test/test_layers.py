@@ -1,7 +1,7 @@
 """The package layout is the architecture: layers import downwards only, no cycles, no
 reaching into another module's privates, and no module or class grows past its size.
 
-    usage, interface   (base: import nothing of the package)
+    usage, interface, yaml_files, outputs   (base: import nothing of the package above it)
     physics/           model, effects/, dynamics, integrators, stability, scene, simulator, batch
     recording/         Rerun telemetry, rosbag2 writing, CSV          (imports physics)
     node/              core, parameters, commands, transports, messages (imports physics, recording)
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "arm_sim_ros"
-LAYERS = {"usage": 0, "interface": 0, "yaml_files": 0, "physics": 1, "recording": 2, "node": 3, "tools": 4}
+LAYERS = {"usage": 0, "interface": 0, "yaml_files": 0, "outputs": 0, "physics": 1, "recording": 2, "node": 3, "tools": 4}
 # Third-party modules a layer must never import (the layer's promise, in DESIGN.md).
 FORBIDDEN = {
     "physics": ("rclpy", "cyclonedds", "rerun", "rosbags", "pyarrow", "sensor_msgs", "std_msgs"),

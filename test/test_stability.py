@@ -272,11 +272,11 @@ def test_damped_release_is_passive_over_the_whole_range(damping, h):
     assert (e - e[0] - drift).max() <= 1e-6
 
 
-def test_arm_sim_run_says_when_it_sub_stepped_or_held(capsys):
+def test_arm_sim_run_says_when_it_sub_stepped_or_held_and_a_fault_exits_1(capsys):
     from arm_sim_ros.tools.cli import main
 
     assert main(["run", "--scene", "damped_release", "--set", "damping=1e4", "--duration", "0.1"]) == 0
     assert "arm-sim: substepping at t = 0 s" in capsys.readouterr().err
-    assert main(["run", "--set", "initial_velocities=1e200,1e200", "--duration", "0.02"]) == 0
+    assert main(["run", "--set", "initial_velocities=1e200,1e200", "--duration", "0.02"]) == 1
     err = capsys.readouterr().err
     assert "arm-sim: fault" in err and "holding the last finite state" in err

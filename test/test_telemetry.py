@@ -416,11 +416,12 @@ def test_arm_sim_run_writes_the_recording(tmp_path, capsys):
     assert "energy/dissipated" in columns and "work/actuator" not in columns
 
 
-def test_arm_sim_run_with_an_unwritable_recording_still_runs(tmp_path, capsys, caplog):
+def test_arm_sim_run_refuses_an_unwritable_recording_before_running(tmp_path, capsys):
+    """One rule for every output (as --csv and --bag): refused up front, exit 2, one line."""
     path = tmp_path / "no" / "such" / "dir.rrd"
-    assert cli.main(["run", "--scene", "release", "--rerun", str(path)]) == 0
-    assert "t = 0.500000 s" in capsys.readouterr().out
-    assert [r.message for r in caplog.records if "cannot write" in r.message] != []
+    assert cli.main(["run", "--scene", "release", "--rerun", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and "does not exist" in err
 
 
 class Log:

@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
 import sys
+import time
+from math import isfinite
 
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
+from ..outputs import check_output, clear_output
 from ..usage import ArgumentParser, UsageError
 from .arguments import add_scene_arguments, scene_from_args
+from .progress import Progress
+from .signals import StopOnSignals
 
 # Modules that contribute subcommands of their own (each defines add_parser).
 SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
@@ -38,15 +44,16 @@ RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None,
 
 
 RUN_BATCH_STEPS = 1000   # steps whose states a recorder with step_batch gets in one call
+CHECK_PERIOD = 0.05      # wall seconds between looks at a stop request and the progress
 
 
-def run_recorded(sim, duration: float, recorders) -> float:
+def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> float:
     """sim.run(duration) with every recorder seeing every step: step_batch(sim, states)
-    once per RUN_BATCH_STEPS steps where a recorder has it (a Python call per step costs
-    more than logging's 10 % budget), else step(sim) after each step. Returns sim.run's
-    result."""
-    if not recorders:
-        return sim.run(duration)
+    once per chunk of at most RUN_BATCH_STEPS steps where a recorder has it (a Python call
+    per step costs more than logging's 10 % budget), else step(sim) after each step.
+    Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
+    (its .requested set by a signal): every recorder has then seen the same last step.
+    Returns the largest |residual| seen."""
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
     states = []
@@ -57,15 +64,36 @@ def run_recorded(sim, duration: float, recorders) -> float:
         for step in each:
             step(s)
 
-    largest, left = 0.0, sim.scene.steps_for(duration, sim.step_size)
-    while left > 0:
-        steps = min(left, RUN_BATCH_STEPS)
-        largest = max(largest, sim.run(steps * sim.step_size, on_step))
+    largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
+    end = sim.time + duration
+    while left > 0 and not (stop is not None and stop.requested):
+        steps = min(left, chunk)
+        started = time.perf_counter()
+        largest = max(largest, sim.run(steps * sim.step_size, on_step if recorders else None))
         for recorder in batched:
             recorder.step_batch(sim, states)
         states.clear()
         left -= steps
+        if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
+            chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)
+        if progress is not None:
+            progress.update(duration - (end - sim.time))
     return largest
+
+
+def check_run_outputs(args) -> None:
+    """Every output of `run` checked by one rule before any work (outputs.check_output)."""
+    if args.publish_rate is not None and not args.bag:
+        raise UsageError("--publish-rate sets the JointState rate of a --bag recording; "
+                         "add --bag DIR, or leave it out")
+    wanted = [(args.csv, "--csv", False, ()), (args.rerun, "--rerun", False, (".rrd",)),
+              (args.bag, "--bag", True, ())]
+    paths = [check_output(path, option, args.force, directory, suffixes)
+             for path, option, directory, suffixes in wanted if path is not None]
+    for path in paths:
+        clear_output(path)
+    if args.publish_rate is None:
+        args.publish_rate = 100.0    # the default, applied here so that giving it is detectable
 
 
 def cmd_run(args) -> int:
@@ -75,23 +103,53 @@ def cmd_run(args) -> int:
     duration = scene.duration if args.duration is None else parse_value("duration", args.duration)
     scene = scene.replace(duration=duration)
     scene.steps_for(duration)  # refuse before any file is opened
+    check_run_outputs(args)
     sim = Simulator(scene)
     recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
-    for recorder in recorders:
-        recorder.start(sim)
-    try:
-        drift = run_recorded(sim, duration, recorders)
-    finally:
+    with StopOnSignals() as stop, Progress(duration, f"arm-sim run {scene.name}") as progress:
         for recorder in recorders:
-            recorder.finish(sim)
-    result = sim.sample().as_dict() | {"max_abs_energy_drift": drift}
+            recorder.start(sim)
+        try:
+            drift = run_recorded(sim, duration, recorders, stop, progress)
+        finally:
+            finish_all(recorders, sim)
+    result = sim.sample().as_dict() | {"max_abs_energy_drift": drift, "fault": sim.fault,
+                                       "refused_steps": sim.refused_steps,
+                                       "interrupted_at": sim.time if stop.requested else None}
     for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
         print(f"arm-sim: {event.kind} at t = {event.t:g} s: {event.message}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(format_result(scene, result))
-    return 0
+    if stop.requested:
+        print(f"arm-sim: interrupted ({stop.requested}) at t = {sim.time:.6f} s; every output "
+              "ends at that step", file=sys.stderr)
+    print(json_text(result) if args.json else format_result(scene, result))
+    return 130 if stop.requested else 1 if sim.fault else 0
+
+
+def finish_all(recorders, sim) -> None:
+    """Close every output even when one fails; then raise the first failure."""
+    failure = None
+    for recorder in recorders:
+        try:
+            recorder.finish(sim)
+        except Exception as error:  # the others still close
+            failure = failure or error
+    if failure is not None:
+        raise failure
+
+
+def json_text(value) -> str:
+    """Strict JSON (RFC 8259): a number that is not finite is null."""
+    return json.dumps(_finite_or_none(value), allow_nan=False)
+
+
+def _finite_or_none(value):
+    if isinstance(value, float):
+        return value if isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    return value
 
 
 def format_result(scene: Scene, r: dict) -> str:
@@ -129,8 +187,10 @@ def build_parser() -> ArgumentParser:
     run.add_argument("--rerun-spawn", action="store_true", help="stream to a new Rerun viewer")
     run.add_argument("--rerun-connect", metavar="ADDR", help="stream to a viewer at host:port")
     run.add_argument("--bag", metavar="DIR", help="write a rosbag2 (MCAP) recording of the topics")
-    run.add_argument("--publish-rate", type=float, default=100.0, metavar="HZ",
+    run.add_argument("--publish-rate", type=float, metavar="HZ",
                      help="JointState rate in the --bag recording (default 100 Hz)")
+    run.add_argument("--force", action="store_true",
+                     help="replace an existing --csv, --rerun or --bag output")
     run.set_defaults(func=cmd_run)
     for name in SUBCOMMAND_MODULES:
         importlib.import_module(name).add_parser(sub)
@@ -146,6 +206,14 @@ def main(argv=None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # The reader went away (`arm-sim run | head -1`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except OSError as error:
+        where = f" {error.filename}" if error.filename else ""
+        print(f"arm-sim: error: cannot write{where}: {error.strerror or error}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -1,0 +1,157 @@
+"""How `arm-sim run` ends, said honestly: strict JSON, a fault exits 1, a signal (SIGINT,
+SIGTERM, SIGHUP) closes every output at the same last step and exits 130, a closed pipe
+is quiet, and every output follows one rule (refused if it exists, unless --force).
+"""
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from rosbags.highlevel import AnyReader
+
+from arm_sim_ros.outputs import check_output
+from arm_sim_ros.tools import cli
+from arm_sim_ros.tools.progress import Progress
+from arm_sim_ros.usage import UsageError
+
+ARM_SIM = [sys.executable, "-m", "arm_sim_ros.tools.cli"]
+
+
+def strict_json(text):
+    """RFC 8259: no NaN, no Infinity."""
+    def refuse(constant):
+        raise ValueError(f"{constant} is not JSON")
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.parametrize("overrides", [
+    ["--set", "initial_velocities=1e200,0"],           # kinetic energy overflows
+    ["--set", "initial_velocities=1e200,1e200"],        # the first step is not finite
+])
+def test_json_is_strict_and_a_faulted_run_exits_1(capsys, overrides):
+    code = cli.main(["run", *overrides, "--duration", "0.05", "--json"])
+    out, err = capsys.readouterr()
+    result = strict_json(out)
+    assert code == 1
+    assert result["fault"] and result["refused_steps"] > 0 and result["interrupted_at"] is None
+    assert "arm-sim: fault" in err
+
+
+def test_a_clean_run_reports_no_fault_and_exits_0(capsys):
+    assert cli.main(["run", "--json"]) == 0
+    result = strict_json(capsys.readouterr().out)
+    assert result["fault"] is None and result["refused_steps"] == 0 and result["interrupted_at"] is None
+
+
+@pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_name):
+    outputs = {"--csv": tmp_path / "run.csv", "--bag": tmp_path / "bag", "--rerun": tmp_path / "run.rrd"}
+    process = subprocess.Popen(
+        [*ARM_SIM, "run", "--duration", "1000", "--json",
+         *(str(x) for option, path in outputs.items() for x in (option, path))],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)
+    started = time.monotonic()
+    process.send_signal(getattr(signal, signal_name))
+    out, err = process.communicate(timeout=30)
+    assert time.monotonic() - started < 5.0
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and f"interrupted ({signal_name}) at t = " in err
+    result = strict_json(out)
+    last = result["interrupted_at"]
+    assert 0 < last < 1000 and result["t"] == last
+    with open(outputs["--csv"]) as stream:
+        assert float(list(csv.reader(stream))[-1][0]) == last
+    with AnyReader([outputs["--bag"]]) as bag:
+        stamps = [t for _, t, _ in bag.messages()]
+    assert max(stamps) == round(last * 1e9)
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_telemetry import read_back
+    assert max(read_back(outputs["--rerun"])["energy/total"]["sim_time"]) == round(last * 1e9)
+
+
+@pytest.mark.parametrize("command", [["run"], ["run", "--csv", "/dev/stdout", "--duration", "5"],
+                                     ["scenes"]])
+def test_a_reader_that_goes_away_ends_the_run_quietly(command):
+    process = subprocess.Popen([*ARM_SIM, *command], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE)
+    process.stdout.readline()
+    process.stdout.close()                      # as `| head -1` does
+    err = process.stderr.read().decode()
+    process.wait(timeout=30)
+    assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+@pytest.mark.parametrize("option, name", [("--csv", "a.csv"), ("--rerun", "a.rrd"), ("--bag", "bag")])
+def test_every_output_refuses_what_exists_and_force_replaces_it(tmp_path, capsys, option, name):
+    path = tmp_path / name
+    assert cli.main(["run", option, str(path)]) == 0
+    capsys.readouterr()
+    assert cli.main(["run", option, str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exists already" in err and "--force" in err
+    assert cli.main(["run", option, str(path), "--force", "--duration", "0.1"]) == 0
+
+
+def test_force_replaces_a_symlink_never_its_target(tmp_path, capsys):
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    link = tmp_path / "run.csv"
+    link.symlink_to(target)
+    assert cli.main(["run", "--csv", str(link)]) == 2
+    assert cli.main(["run", "--csv", str(link), "--force"]) == 0
+    assert target.read_text() == "keep me" and not link.is_symlink()
+
+
+def test_force_replaces_only_a_bag_directory(tmp_path):
+    folder = tmp_path / "notes"
+    folder.mkdir()
+    (folder / "thesis.tex").write_text("years of work")
+    with pytest.raises(UsageError, match="holds more than a bag's files"):
+        check_output(str(folder), "--bag", force=True, directory=True)
+
+
+def test_an_unwritable_directory_is_refused_before_the_work(tmp_path):
+    if os.geteuid() == 0:
+        pytest.skip("root writes anywhere")
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    with pytest.raises(UsageError, match="is not writable"):
+        check_output(str(locked / "a.csv"), "--csv")
+
+
+class Clock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+class Stream(list):
+    def write(self, text):
+        self.append(text)
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return False
+
+
+def test_progress_is_silent_for_short_work_and_a_plain_line_off_a_terminal():
+    clock, stream = Clock(), Stream()
+    progress = Progress(100.0, "arm-sim run release", stream=stream, clock=clock)
+    clock.now = 1.0
+    progress.update(50.0)
+    assert stream == []                                  # done within a couple of seconds
+    clock.now = 12.0
+    progress.update(60.0)
+    line = "".join(stream)
+    assert line.startswith("arm-sim run release: 60 of 100 s (60.0 %), about 8 s left")
+    assert "\r" not in line
