@@ -6,6 +6,7 @@ they are.
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import stat
@@ -70,6 +71,21 @@ def write_text(path, text: str, option: str) -> None:
     except OSError as error:
         partial.unlink(missing_ok=True)
         raise UsageError(f"{option} {path}: cannot write: {error.strerror}") from None
+
+
+def strict_json(value, **options) -> str:
+    """JSON as RFC 8259 has it: a number that is not finite becomes null."""
+    return json.dumps(_finite_or_none(value), allow_nan=False, **options)
+
+
+def _finite_or_none(value):
+    if isinstance(value, float):
+        return value if value - value == 0.0 else None
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    return value
 
 
 def _is_stream(p: Path) -> bool:

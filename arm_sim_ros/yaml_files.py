@@ -43,8 +43,20 @@ for first in "-+.0123456789":
 
 def loads(text: str, what: str):
     """Data from YAML text; YamlFileError naming `what` and the line for anything wrong."""
+    return _parsed(lambda: yaml.load(text, Loader=_Loader), what)   # noqa: S506 (SafeLoader)
+
+
+def compose(text: str, what: str):
+    """The YAML node tree of `text` (scalars untyped, their quoting kept; aliases refused),
+    for readers with typing rules of their own (ROS 2 parameters)."""
+    if len(text) > MAX_FILE_BYTES:
+        raise YamlFileError(f"{what} is larger than {MAX_FILE_BYTES} bytes")
+    return _parsed(lambda: yaml.compose(text, Loader=_Loader), what)   # noqa: S506
+
+
+def _parsed(parse, what: str):
     try:
-        return yaml.load(text, Loader=_Loader)   # noqa: S506 (a SafeLoader)
+        return parse()
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -102,6 +102,7 @@ hostile_values = st.one_of(
 # tests the type checks.
 plausible = st.one_of(hostile_numbers, st.floats(1e-3, 1e3), st.floats(-10.0, 10.0))
 OF_KIND = {"float": plausible, "float_pair": st.lists(plausible, min_size=2, max_size=2),
+           "float_or_pair": st.one_of(plausible, st.lists(plausible, min_size=2, max_size=2)),
            "bool": st.booleans(), "str_list": st.lists(st.text(max_size=3), max_size=3),
            "str": st.sampled_from(["", "rk4", "euler", "nonsense", "command", "constant",
                                    "gravity_compensation", "base_link"])}

@@ -66,6 +66,8 @@ class ArmSimCore:
                                   "from its initial state")
         else:
             self.config = config
+            if "payload_mass" in changed:
+                self._set_payload(config.values["payload_mass"])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder.finish()
             self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim)
@@ -89,6 +91,14 @@ class ArmSimCore:
         """Hold a new command; the steps taken under the old one reach the recorder first."""
         self.recorder.hand_over()
         self.sim.set_command(tau1, tau2)
+
+    def _set_payload(self, mass: float) -> None:
+        """Grasp or release now; the steps before it reach the recorder first."""
+        self.recorder.hand_over()
+        self.sim.set_payload(mass)
+        self.recorder.start(self.sim)       # the recorder learns the new channels
+        self._event(f"payload {mass:g} kg: {'grasped' if mass else 'released'}; "
+                    "the energy that changed hands is booked in payload_exchange")
 
     def tick(self, wall_now: float | None = None) -> JointStateData:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish."""

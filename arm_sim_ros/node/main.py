@@ -16,140 +16,16 @@ import signal
 import sys
 import time
 
-import yaml
-
 from . import transports
 from ..interface import NODE_NAME
+from ..physics.scene import MAX_DURATION
 from ..usage import ArgumentParser, UsageError
-from .parameters import ParameterRefused
+from .parameters import PARAMETERS, ParameterRefused
+from .ros_args import (LOG_LEVELS, load_params_file, node_parameters, parse_ros_args,  # noqa: F401
+                       split_ros_args)
 
-LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warn": logging.WARNING,
-          "warning": logging.WARNING, "error": logging.ERROR, "fatal": logging.CRITICAL}
-
-
-def split_ros_args(argv: list) -> tuple[list, list]:
-    """(our arguments, the arguments inside --ros-args ... [--]), as rcl splits them."""
-    ours, ros, inside = [], [], False
-    for arg in argv:
-        if arg == "--ros-args":
-            inside = True
-        elif arg == "--" and inside:
-            inside = False
-        elif inside:
-            ros.append(arg)
-        else:
-            ours.append(arg)
-    return ours, ros
-
-
-def parse_ros_args(ros: list) -> dict:
-    """`-p`, `--params-file`, `-r` and `--log-level` as rcl reads them."""
-    assignments, remap, level = [], {}, None   # ("file", path) / ("param", name, value), in order
-    items = iter(ros)
-    for flag in items:
-        value = next(items, None)
-        if value is None:
-            raise UsageError(f"--ros-args {flag} needs a value")
-        if flag in ("-p", "--param"):
-            name, value_text = _assignment(flag, value)
-            assignments.append(("param", name, _yaml_value(name, value_text)))
-        elif flag == "--params-file":
-            assignments.append(("file", value))
-        elif flag in ("-r", "--remap"):
-            source, target = _assignment(flag, value)
-            remap[source] = target
-        elif flag == "--log-level":
-            level = value.rsplit(":=", 1)[-1].lower()
-            if level not in LEVELS:
-                raise UsageError(f"--log-level {value!r}: choose one of {', '.join(LEVELS)}")
-        else:
-            raise UsageError(f"--ros-args {flag} is not supported on the dds transport "
-                             "(supported: -p, --params-file, -r, --log-level)")
-    return {"assignments": assignments, "remap": remap, "level": level}
-
-
-def _assignment(flag: str, text: str) -> tuple[str, str]:
-    name, sep, value = text.partition(":=")
-    if not sep or not name:
-        raise UsageError(f"{flag} {text!r} is not of the form name:=value")
-    return name, value
-
-
-def _yaml_value(name: str, text: str):
-    """`-p` values are YAML, as in rcl: 100 is an integer, 1.0 a double, [1.0, 0.0] a list."""
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        raise UsageError(f"-p {name}:={text!r}: the value is not valid YAML") from None
-    return "" if value is None else value
-
-
-def read_params_file(path: str, full_name: str) -> tuple[dict, dict]:
-    """(the `/**` parameters, this node's own) of a ROS 2 parameter file. Node keys may be
-    nested namespaces (`robot: arm_sim: ros__parameters:`); nested parameter mappings become
-    dotted names."""
-    try:
-        with open(path) as stream:
-            data = yaml.safe_load(stream) or {}
-    except OSError as error:
-        raise UsageError(f"cannot read --params-file {path}: {error.strerror}") from None
-    except yaml.YAMLError as error:
-        raise UsageError(f"--params-file {path} is not valid YAML: {error}") from None
-    if not isinstance(data, dict):
-        raise UsageError(f"--params-file {path} must map node names to ros__parameters")
-    wildcard, own = {}, {}
-    for node, params in _node_sections(data):
-        if node == "/**":
-            wildcard.update(params)
-        elif node == full_name:
-            own.update(params)
-    return wildcard, own
-
-
-def _node_sections(data: dict, prefix: str = ""):
-    for key, value in data.items():
-        if not isinstance(value, dict):
-            continue
-        name = prefix + "/" + str(key).strip("/")
-        if "ros__parameters" in value:
-            yield name, _flatten(value["ros__parameters"] or {})
-        else:
-            yield from _node_sections(value, name)
-
-
-def full_node_name(node_name: str = NODE_NAME, namespace: str = "/") -> str:
-    return namespace.rstrip("/") + "/" + node_name
-
-
-def load_params_file(path: str, node_name: str = NODE_NAME, namespace: str = "/") -> dict:
-    """What one parameter file sets for this node."""
-    wildcard, own = read_params_file(path, full_node_name(node_name, namespace))
-    return wildcard | own
-
-
-def _flatten(mapping: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in mapping.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
-
-
-def node_parameters(ros: dict, node_name: str, namespace: str) -> dict:
-    """rclcpp's resolve_parameter_overrides: `/**` values first, then the node's own."""
-    wildcard, own = {}, {}
-    for kind, *what in ros["assignments"]:
-        if kind == "file":
-            file_wildcard, file_own = read_params_file(what[0], full_node_name(node_name, namespace))
-            wildcard.update(file_wildcard)
-            own.update(file_own)
-        else:
-            wildcard[what[0]] = what[1]
-    params = wildcard | own
-    params.pop("use_sim_time", None)  # every ROS node has it; the dds node keeps its own clock
-    return params
+LEVELS = dict(zip(LOG_LEVELS, (logging.DEBUG, logging.INFO, logging.WARNING, logging.WARNING,
+                               logging.ERROR, logging.CRITICAL)))
 
 
 def configure_logging(level: str | None) -> None:
@@ -187,8 +63,32 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
     return 0
 
 
+ROS_TYPES = {"float": "double", "str": "string", "bool": "bool", "float_pair": "double[2]",
+             "float_or_pair": "double or double[2]", "str_list": "string[]"}
+
+
+def parameter_help() -> str:
+    """Every parameter from the one table: ROS type, default (scene release) and meaning."""
+    from .parameters import scene_defaults
+
+    defaults = scene_defaults("release")
+    lines = ["parameters (--ros-args -p NAME:=VALUE, or --params-file FILE with "
+             "arm_sim: ros__parameters: NAME: VALUE;",
+             "scene-derived defaults are those of scene release; `ros2 param set` changes "
+             "them while it runs):"]
+    for spec in PARAMETERS:
+        default = defaults[spec.name]
+        lines.append(f"  {spec.name:<20} {ROS_TYPES[spec.kind]:<20} default {default!r}")
+        lines.append(f"      {spec.description}")
+    lines.append("example: arm_sim_node --ros-args -p scene:=damped_release "
+                 "-p publish_rate:=50.0 -p rerun_path:=arm.rrd")
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog="arm_sim_node", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="arm_sim_node", description=__doc__.split("\n\n")[0],
+                            epilog=parameter_help(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--transport", default="auto", choices=("auto",) + transports.TRANSPORTS,
                         help="rclpy when it imports (auto), else dds")
     parser.add_argument("--duration", type=float, metavar="SECONDS",
@@ -204,8 +104,9 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         args = build_parser().parse_args(ours)
-        if args.duration is not None and not (args.duration >= 0 and args.duration < float("inf")):
-            raise UsageError(f"--duration {args.duration} must be a finite number of seconds >= 0")
+        if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:
+            raise UsageError(f"--duration {args.duration:g} must be a number of seconds from 0 "
+                             f"to {MAX_DURATION:g}")
         transport = transports.choose(args.transport)
         status = None if args.quiet else _print_status
         if transport == "rclpy":

@@ -55,7 +55,10 @@ PARAMETERS = (
                 "constant, gravity_compensation, frozen_gravity", _node_policy),
     _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
     _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
-    _scene_spec("damping", "float", "joint damping d, N m s/rad (0 = off)"),
+    _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)"),
+    ParameterSpec("payload_mass", "float", lambda scene: scene.payload["mass"] if scene.payload
+                  else 0.0, "kg at the tip of link 2; a change at run time grasps (momentum "
+                  "kept) or releases (velocity kept) without a restart"),
     _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
     _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
     _scene_spec("link_lengths", "float_pair", "[l1, l2] m"),
@@ -82,7 +85,8 @@ PARAMETERS = (
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
-SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair"}   # node kind -> scene kind
+SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
+               "float_or_pair": "float_or_pair"}
 
 
 def coerce(spec: ParameterSpec, value):
@@ -94,7 +98,7 @@ def coerce(spec: ParameterSpec, value):
             value = coerce_value(name, SCENE_KINDS[kind], value)
         except SceneError as error:
             raise ParameterRefused(name, str(error)) from None
-        return list(value) if kind == "float_pair" else value
+        return list(value) if isinstance(value, tuple) else value
     if kind == "bool":
         if not isinstance(value, bool):
             raise ParameterRefused(name, f"must be true or false, got {value!r}")
@@ -166,6 +170,9 @@ def _build(values: dict, load, changed) -> NodeConfig:
     values = {name: coerce(SPECS[name], values[name]) for name in SPECS}
     base = load(values["scene"])
     scene_values = {name: values[name] for name in SCENE_PARAMETERS if name in FIELD_KINDS}
+    mass = values["payload_mass"]
+    if mass != (base.payload["mass"] if base.payload else 0.0):
+        scene_values["payload"] = {"mass": mass} if mass > 0 else None
     try:
         scene = base.replace(**scene_values)
     except (SceneError, ParameterError) as error:
@@ -189,6 +196,7 @@ def _check_node_values(values: dict) -> None:
          "must be >= 0 (0 = as fast as possible)"),
         ("command_timeout", values["command_timeout"] >= 0, "must be >= 0 (0 = hold forever)"),
         ("torque_limit", values["torque_limit"] > 0, "must be positive (N m)"),
+        ("payload_mass", values["payload_mass"] >= 0, "must be >= 0 (kg; 0 = no payload)"),
         ("joint_names", len(values["joint_names"]) == 2, "needs exactly two names"),
     )
     for name, ok, reason in checks:

@@ -18,6 +18,8 @@ from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
 
 MAX_INITIAL_ANGLE = 1e6   # rad
+MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
+MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 
 
 class SceneError(ValueError):
@@ -71,8 +73,9 @@ class Scene:
             if not getattr(self, name) >= 1e-14:
                 raise SceneError(f"{name} = {getattr(self, name)} must be at least 1e-14 "
                                  "(tighter than rounding cannot be met)")
-        if not self.step_size > 0:
-            raise SceneError(f"step_size = {self.step_size} must be positive")
+        if not MIN_STEP_SIZE <= self.step_size <= MAX_DURATION:
+            raise SceneError(f"step_size = {self.step_size} must be positive: from "
+                             f"{MIN_STEP_SIZE:g} s (stamps count nanoseconds) to {MAX_DURATION:g} s")
         if not self.duration >= 0:
             raise SceneError(f"duration = {self.duration} must not be negative")
         try:
@@ -124,8 +127,9 @@ class Scene:
     def steps_for(self, duration: float, step_size: float | None = None) -> int:
         """The whole number of steps that covers `duration`; anything else is refused."""
         h = self.step_size if step_size is None else step_size
-        if not (isfinite(duration) and duration >= 0):
-            raise SceneError(f"duration = {duration} must be a finite, non-negative number of seconds")
+        if not (isfinite(duration) and 0 <= duration <= MAX_DURATION):
+            raise SceneError(f"duration = {duration} must be a number of seconds from 0 to "
+                             f"{MAX_DURATION:g} (stamps count nanoseconds in 64 bits)")
         steps = round(duration / h)
         if abs(steps * h - duration) > 1e-9 * max(1.0, duration):
             raise SceneError(f"duration {duration} s is not a whole number of steps of {h} s "

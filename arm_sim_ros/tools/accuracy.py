@@ -10,20 +10,24 @@ convergence order.
 """
 from __future__ import annotations
 
-import json
-import sys
 import time
 from dataclasses import asdict, dataclass
 from math import isfinite, log
+from pathlib import Path
 
 from ..physics import model
 from ..physics.integrators import INTEGRATORS, compile_step
 from ..physics.scene import Scene, SceneError
 from ..physics.simulator import Simulator
+from ..outputs import check_output, clear_output, strict_json, write_text
 from ..usage import UsageError
 from .arguments import add_scene_arguments, scene_from_args
+from .progress import Progress
 
 REFERENCE_TOLERANCE = 1e-13
+MODEL_EFFECTS = {"gravity", "damping", "actuator"}    # what model.forward_dynamics covers
+MAX_RUN_STEPS = 10_000_000      # steps per run; beyond, a study would run for hours
+PLOT_FORMATS = (".png", ".svg", ".pdf")
 DEFAULT_STEPS = (0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625, 0.0003125, 0.00015625)
 DEFAULT_TOLERANCES = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 # Errors used to fit an order: below, the reference and round-off dominate; above, the
@@ -67,6 +71,13 @@ def reference(scene: Scene, times) -> list[tuple]:
         books = {"work": tau[0] * qd[0] + tau[1] * qd[1],
                  "dissipated": damping * (qd[0] * qd[0] + qd[1] * qd[1])}
         return [qd[0], qd[1], qdd[0], qdd[1], *(books[c] for c in channels)]
+
+    if not set(sim.dynamics.effects) <= MODEL_EFFECTS or not isinstance(damping, float):
+        # The model's equations cover the explainer's effects; the others are checked
+        # against separately written equations in test/test_effects.py, so here the
+        # reference integrates the generated right-hand side (integration error only).
+        f = sim.dynamics.function
+        rates = lambda t, y: (y[2], y[3], *f(*y))  # noqa: E731  (f gives the rest)
 
     solution = solve_ivp(rates, (times[0], times[-1]), list(sim.state), method="DOP853",
                          t_eval=times, rtol=REFERENCE_TOLERANCE, atol=REFERENCE_TOLERANCE)
@@ -234,14 +245,6 @@ def plot(result: dict, path: str) -> None:
     plt.close(fig)
 
 
-def _progress_bar(done: int, total: int, label: str) -> None:
-    width = 30
-    filled = width * done // max(total, 1)
-    end = "\n" if done == total else ""
-    print(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label:<28}",
-          end=end, file=sys.stderr, flush=True)
-
-
 def _positive_list(values, what: str, above: float = 0.0, below: float | None = None) -> list[float]:
     for v in values:
         if not (isfinite(v) and v > above and (below is None or v < below)):
@@ -250,7 +253,26 @@ def _positive_list(values, what: str, above: float = 0.0, below: float | None = 
     return list(values)
 
 
+def check_plan(scene: Scene, duration: float, steps, tolerances) -> None:
+    """Refuse, before the reference is computed, a plan the study cannot carry out."""
+    interval = max(list(steps) + [scene.step_size])
+    for h in steps:
+        if abs(round(interval / h) * h - interval) > 1e-9 * interval:
+            raise UsageError(f"--steps {h:g} does not divide {interval:g}, the largest step, "
+                             "where every run is compared; choose steps that divide it")
+        if duration / h > MAX_RUN_STEPS:
+            raise UsageError(f"--steps {h:g} over {duration:g} s is {duration / h:.3g} steps; "
+                             f"the study allows {MAX_RUN_STEPS:.0e} per run: use a larger step "
+                             "or a shorter --duration")
+    if tolerances and duration / scene.step_size > MAX_RUN_STEPS:
+        raise UsageError(f"the scene's step {scene.step_size:g} s over {duration:g} s is too "
+                         f"many steps for the study ({MAX_RUN_STEPS:.0e} per run)")
+    sample_times(scene, duration, interval)
+
+
 def cmd_accuracy(args) -> int:
+    json_path = args.json and check_output(args.json, "--json", args.force, suffixes=(".json",))
+    plot_path = args.plot and check_output(args.plot, "--plot", args.force, suffixes=PLOT_FORMATS)
     scene = scene_from_args(args)
     unknown = [n for n in args.integrators if n not in INTEGRATORS]
     if unknown:
@@ -260,20 +282,28 @@ def cmd_accuracy(args) -> int:
     tolerances = _positive_list(args.tolerances, "tolerance", above=MIN_TOLERANCE, below=1.0)
     if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration {args.duration:g} must be a positive number of seconds")
-    result = study(scene, args.duration, args.integrators, steps, tolerances, _progress_bar)
+    check_plan(scene, args.duration, steps, tolerances)
+    with Progress(1.0, "arm-sim accuracy", unit="runs") as progress:
+        def report(done, total, label):
+            progress.total = total
+            progress.update(done)
+        result = study(scene, args.duration, args.integrators, steps, tolerances, report)
     print(format_table(result))
     best = cheapest(result, 1e-6)
     if best:
         print(f"cheapest run with max state error <= 1e-6: {best['integrator']} "
               f"h={best['step_size']:g}" + (f" tol={best['tolerance']:g}" if best["tolerance"] else "")
               + f" ({best['cpu_s_per_sim_s']:.2e} CPU s per simulated s)")
-    for path, write in ((args.json, lambda p: open(p, "w").write(json.dumps(result, indent=1))),
-                        (args.plot, lambda p: plot(result, p))):
-        if path:
-            try:
-                write(path)
-            except OSError as error:
-                raise UsageError(f"cannot write {path}: {error.strerror}") from None
+    if json_path:
+        clear_output(json_path)
+        write_text(json_path, strict_json(result, indent=1), "--json")
+    if plot_path:
+        clear_output(plot_path)
+        try:
+            plot(result, str(plot_path))
+        except OSError as error:
+            Path(plot_path).unlink(missing_ok=True)
+            raise UsageError(f"--plot {plot_path}: cannot write: {error.strerror}") from None
     return 0
 
 
@@ -290,5 +320,7 @@ def add_parser(subparsers) -> None:
                    metavar="TOL", help="rtol = atol values for embedded pairs, stepping at the "
                                        "scene's publish step")
     p.add_argument("--json", metavar="PATH", help="write every run and the fitted orders as JSON")
-    p.add_argument("--plot", metavar="PATH", help="write the work-precision diagram as PNG")
+    p.add_argument("--plot", metavar="PATH", help="write the work-precision diagram "
+                                                  "(.png, .svg or .pdf)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json or --plot")
     p.set_defaults(func=cmd_accuracy)

@@ -12,12 +12,11 @@ import json
 import os
 import sys
 import time
-from math import isfinite
 
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
-from ..outputs import check_output, clear_output
+from ..outputs import check_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError
 from .arguments import add_scene_arguments, scene_from_args
 from .progress import Progress
@@ -121,7 +120,7 @@ def cmd_run(args) -> int:
     if stop.requested:
         print(f"arm-sim: interrupted ({stop.requested}) at t = {sim.time:.6f} s; every output "
               "ends at that step", file=sys.stderr)
-    print(json_text(result) if args.json else format_result(scene, result))
+    print(strict_json(result) if args.json else format_result(scene, result))
     return 130 if stop.requested else 1 if sim.fault else 0
 
 
@@ -135,21 +134,6 @@ def finish_all(recorders, sim) -> None:
             failure = failure or error
     if failure is not None:
         raise failure
-
-
-def json_text(value) -> str:
-    """Strict JSON (RFC 8259): a number that is not finite is null."""
-    return json.dumps(_finite_or_none(value), allow_nan=False)
-
-
-def _finite_or_none(value):
-    if isinstance(value, float):
-        return value if isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite_or_none(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite_or_none(v) for v in value]
-    return value
 
 
 def format_result(scene: Scene, r: dict) -> str:

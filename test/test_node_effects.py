@@ -1,0 +1,69 @@
+"""The node runs every effect scene: per-joint damping as a parameter, the payload as a
+parameter that grasps and releases at run time, and JointState effort is the torque the
+joints receive (after effort limits and motor windings)."""
+import logging
+
+import pytest
+
+from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.physics.scene import load_scene, preset_names
+from arm_sim_ros.physics.simulator import Simulator
+
+EFFECT_PRESETS = sorted(n for n in preset_names() if Simulator(load_scene(n)).dynamics.effects
+                        and set(Simulator(load_scene(n)).dynamics.effects)
+                        - {"gravity", "actuator", "damping"} or n == "per_joint_damping")
+
+
+def make_core(**overrides):
+    return ArmSimCore(resolve_parameters(overrides), logging.getLogger("test_node_effects"),
+                      wall_clock=lambda: 0.0, start_stamp_ns=0)
+
+
+@pytest.mark.parametrize("scene", EFFECT_PRESETS)
+def test_every_effect_scene_runs_on_the_node_as_offline(scene):
+    core = make_core(scene=scene, publish_rate=10.0)
+    for _ in range(5):
+        state = core.tick(0.0)
+    offline = Simulator(core.config.scene)
+    offline.run(core.sim.time)
+    assert not core.held
+    assert core.sim.state == offline.state                 # the same simulation, bit for bit
+    assert state.effort == list(offline.joint_torque())
+
+
+def test_per_joint_damping_is_one_parameter_with_two_values():
+    core = make_core(scene="per_joint_damping")
+    assert core.config.values["damping"] == [0.5, 0.05]
+    core.set_parameters({"damping": [0.1, 0.2]})
+    assert core.sim.scene.damping == (0.1, 0.2)
+
+
+def test_effort_is_what_the_joint_receives_after_the_effort_limit():
+    core = make_core(scene="effort_limited_hold")
+    state = core.tick(0.0)
+    # gravity compensation asks for ~19.6 N m at the shoulder; the limit is 15 N m
+    assert abs(state.effort[0]) == pytest.approx(15.0)
+
+
+def test_payload_mass_grasps_and_releases_without_a_restart_and_the_books_close():
+    core = make_core(scene="release", publish_rate=100.0)
+    for _ in range(20):
+        core.tick(0.0)
+    time_before = core.sim.time
+    assert core.set_parameters({"payload_mass": 0.5}) == ["payload_mass"]
+    assert core.sim.time == time_before and core.sim.scene.payload == {"mass": 0.5}
+    for _ in range(20):
+        core.tick(0.0)
+    core.set_parameters({"payload_mass": 0.0})
+    for _ in range(20):
+        core.tick(0.0)
+    assert core.sim.channel_values(core.sim.state)["payload_exchange"] != 0.0
+    assert abs(core.sim.residual()) < 1e-4       # RK4's error at h = 0.01 s over 0.6 s
+
+
+def test_a_negative_payload_is_refused_and_changes_nothing():
+    core = make_core(scene="release")
+    with pytest.raises(ParameterRefused, match="payload_mass"):
+        core.set_parameters({"payload_mass": -1.0})
+    assert core.sim.scene.payload is None
