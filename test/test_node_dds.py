@@ -148,7 +148,7 @@ def test_warnings_are_rate_limited_then_report_what_was_held_back(caplog):
         core.on_command([math.inf, 0.0])
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warnings) == 2
-    assert "tau1 = inf is not finite" in warnings[1] and "(4 more like this" in warnings[1]
+    assert "tau1 = inf is not finite" in warnings[1] and "(4 more refused commands since" in warnings[1]
     assert core.refused_commands == 6
 
 
@@ -401,8 +401,9 @@ class RecorderSpy:
     def step(self, sim):
         self.calls.append(("step", sim.steps))
 
-    def event(self, text):
+    def event(self, text, level="info"):
         self.calls.append(("event", text))
+        self.levels = getattr(self, "levels", {}) | {text: level}
 
     def finish(self, sim):
         self.calls.append(("finish", sim.steps))
@@ -425,6 +426,8 @@ def test_recorder_sees_every_physics_step_and_the_events():
     assert events[0].startswith("scene release started")
     assert any("refused command: tau1 = nan" in e for e in events)
     assert any("command timeout" in e for e in events)
+    # events carry the level the node logged them at: refusals and timeouts are warnings
+    assert {spy.levels[e] for e in events if "refused" in e or "timeout" in e} == {"warn"}
     assert events[-1] == "reset to the scene's initial state"
     assert spy.calls[-1] == ("finish", 0) and [c for c in spy.calls if c[0] == "start"] == [
         ("start", 0), ("start", 0)]

@@ -15,7 +15,8 @@ WARN_PERIOD = 1.0                 # seconds between repeated warnings of one kin
 
 
 class RateLimitedLog:
-    """At most one line per kind per WARN_PERIOD; the next says how many were held back."""
+    """At most one line per kind per WARN_PERIOD; the next says how many of that kind (for
+    any reason) were held back."""
 
     def __init__(self, log, clock=time.monotonic):
         self.log, self.clock = log, clock
@@ -29,7 +30,7 @@ class RateLimitedLog:
             return
         held = self._held.pop(kind, 0)
         self._last[kind] = now
-        self.log.warning(text + (f" ({held} more like this since the last warning)" if held else ""))
+        self.log.warning(text + (f" ({held} more {kind} since the last warning)" if held else ""))
 
 
 def refusal(data, torque_limit: float) -> str | None:
@@ -67,11 +68,11 @@ class CommandIntake:
         reason = refusal(data, torque_limit)
         if reason is not None:
             self.refused += 1
-            self.warnings.warning("refused", f"refused torque command: {reason}; holding "
+            self.warnings.warning("refused commands", f"refused torque command: {reason}; holding "
                                   f"{list(self.value)} (refused so far: {self.refused})")
             return reason, None
         if policy not in COMMAND_POLICIES:
-            self.warnings.warning("ignored", f"policy {policy!r} ignores {COMMAND_TOPIC}; "
+            self.warnings.warning("ignored commands", f"policy {policy!r} ignores {COMMAND_TOPIC}; "
                                   "set policy to command to drive the arm")
             return None, None
         if self.received_at is None:

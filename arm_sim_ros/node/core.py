@@ -82,7 +82,7 @@ class ArmSimCore:
         reason, command = self.commands.take(data, self.config.scene.policy,
                                              self.config.values["torque_limit"], self.sim.time)
         if reason is not None:
-            self.recorder.event(f"refused command: {reason}")
+            self.recorder.event(f"refused command: {reason}", "warn")
         elif command is not None:
             self._set_command(*command)
         return reason
@@ -106,7 +106,7 @@ class ArmSimCore:
         if not self.held:
             if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
                 self._set_command(0.0, 0.0)
-                self.recorder.event("command timeout: torque dropped to zero")
+                self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
         return self.joint_state()
 
@@ -128,7 +128,7 @@ class ArmSimCore:
             self.held = True
             self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
                            f"{sim.time:.6f} s); holding until reset")
-            self.recorder.event("integration not finite: holding")
+            self.recorder.event("integration not finite: holding", "error")
             return
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
 

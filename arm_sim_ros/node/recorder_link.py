@@ -46,8 +46,9 @@ class RecorderLink:
             self.log.error(f"Rerun telemetry failed in {method}() and is now off: {error}")
             self.recorder = None
 
-    def event(self, text: str) -> None:
-        self.call("event", text)
+    def event(self, text: str, level: str = "info") -> None:
+        """A line in the recording's events, at the level the node logged it."""
+        self.call("event", text, level)
 
     def step(self, steps: int) -> None:
         """`steps` physics steps, each seen by the recorder: their states collected and

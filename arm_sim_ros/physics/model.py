@@ -50,6 +50,10 @@ class ArmParameters:
         # determinant vanishes there has a singular mass matrix and cannot be simulated.
         a, b, d, m22 = self.mass_constants
         det_min = a * m22 - d * d - b * b
+        if not all(isfinite(v) for v in (a, b, d, m22, det_min, a * m22)):
+            raise ParameterError(
+                "the arm's masses, lengths and inertias are so large that its mass matrix "
+                f"overflows double precision (M11 = {a:.3g}); use SI units at a robot's scale")
         if not det_min > 1e-12 * a * m22:
             raise ParameterError(
                 "the mass matrix becomes singular at some elbow angle "
