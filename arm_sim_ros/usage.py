@@ -5,6 +5,7 @@ Every layer may raise `UsageError`; the front ends (`arm-sim`, `arm_sim_node`) p
 from __future__ import annotations
 
 import argparse
+import unicodedata
 
 
 class UsageError(ValueError):
@@ -16,3 +17,10 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(message)
+
+
+def one_line(message) -> str:
+    """`message` as one printable line: control characters a user typed into a name or a
+    value (a newline, a carriage return...) are shown escaped, never acted on."""
+    return "".join(repr(c)[1:-1] if unicodedata.category(c).startswith("C") else c
+                   for c in str(message))

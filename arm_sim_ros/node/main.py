@@ -19,7 +19,7 @@ import time
 from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
-from ..usage import ArgumentParser, UsageError
+from ..usage import ArgumentParser, UsageError, one_line
 from .parameters import PARAMETERS, ParameterRefused
 from .ros_args import (LOG_LEVELS, load_params_file, node_parameters, parse_ros_args,  # noqa: F401
                        split_ros_args)
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
             return run(["arm_sim_node", "--ros-args", *ros_argv], args.duration, status)
         return run_dds(ros_argv, args.duration, status)
     except (UsageError, ParameterRefused, transports.TransportUnavailable) as error:
-        print(f"arm_sim_node: error: {error}", file=sys.stderr)
+        print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 0

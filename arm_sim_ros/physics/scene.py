@@ -251,15 +251,22 @@ def load_scene(name: str = "release") -> Scene:
     directory in it); the preset directories are searched in scene_dirs() order."""
     if name.endswith((".yaml", ".yml")) or os.sep in name:
         path = Path(name)
-        if not path.is_file():
+        if not _is_file(path):
             raise SceneError(f"scene file {name} does not exist")
         return scene_from_file(path, path.stem)
     for directory in scene_dirs():
         path = directory / f"{name}.yaml"
-        if path.is_file():
+        if _is_file(path):
             return scene_from_file(path, name)
     known = ", ".join(preset_names()) or "none found"
     raise SceneError(f"unknown scene {name!r}; presets: {known} (or give a path to a .yaml file)")
+
+
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except (OSError, ValueError):          # a name too long, a NUL byte in it
+        return False
 
 
 def scene_from_file(path: Path, name: str) -> Scene:

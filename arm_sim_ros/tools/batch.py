@@ -9,6 +9,7 @@ from ..usage import UsageError
 from .arguments import add_scene_arguments, scene_from_args
 
 
+MAX_THREADS = 256
 BYTES_PER_ARM = 250     # peak resident memory per arm, measured at 1e6 arms (212 MB)
 
 
@@ -22,8 +23,10 @@ def usable_memory() -> int:
 
 def cmd_batch(args) -> int:
     scene = scene_from_args(args)
-    if args.count < 1 or args.threads < 1:
-        raise UsageError("--count and --threads must be at least 1")
+    if args.count < 1 or not 1 <= args.threads <= MAX_THREADS:
+        raise UsageError(f"--count must be at least 1 and --threads from 1 to {MAX_THREADS}")
+    if args.seed < 0:
+        raise UsageError(f"--seed {args.seed} must be a non-negative integer")
     memory = args.count * BYTES_PER_ARM
     if memory > usable_memory():
         raise UsageError(f"--count {args.count} needs about {memory / 2**30:.3g} GiB "

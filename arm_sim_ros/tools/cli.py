@@ -17,7 +17,7 @@ from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
 from ..outputs import check_output, clear_output, strict_json
-from ..usage import ArgumentParser, UsageError
+from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
 from .progress import Progress
 from .signals import StopOnSignals
@@ -186,7 +186,7 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         return args.func(args)
     except (UsageError, SceneError, ParameterError) as error:
-        print(f"arm-sim: error: {error}", file=sys.stderr)
+        print(f"arm-sim: error: {one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
@@ -196,7 +196,8 @@ def main(argv=None) -> int:
         return 141
     except OSError as error:
         where = f" {error.filename}" if error.filename else ""
-        print(f"arm-sim: error: cannot write{where}: {error.strerror or error}", file=sys.stderr)
+        print(one_line(f"arm-sim: error: cannot write{where}: {error.strerror or error}"),
+              file=sys.stderr)
         return 2
 
 
