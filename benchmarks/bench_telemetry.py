@@ -17,8 +17,8 @@ including the sender thread and rerun's encoder threads (runs of N and 2N steps,
 start/finish cost, shown apart, drops out; what the machine pays); bytes written per step.
 The modes run round-robin, --repeat rounds, so each overhead is also taken within a round
 (same machine load on both sides): median and range over the rounds.
-A second table times the energy readouts alone: model's scalar functions per step vs the
-vectorised helper per row of a batch (why telemetry.energies exists).
+A second table times the energy readouts alone: Simulator.energies per step vs the
+vectorised readouts.energies per row of a batch (why readouts.energies exists).
 
     python benchmarks/bench_telemetry.py [--scene damped_release] [--seconds 30] [--repeat 7]
 
@@ -132,7 +132,8 @@ def per_sample(scene, steps, path):
     sim = Simulator(scene)
     arm, gravity = sim.arm, scene.gravity
     every = round(writer.FRAME_PERIOD / scene.step_size)
-    dissipated = 4 + sim.channels.index("dissipated") if "dissipated" in sim.channels else None
+    dissipated = (4 + len(sim.extra) + sim.channels.index("dissipated")
+                  if "dissipated" in sim.channels else None)
     with Clocks() as clocks:
         stream = rr.RecordingStream("arm_sim_bench")
         stream.save(str(path))
@@ -148,7 +149,7 @@ def per_sample(scene, steps, path):
             stream.log("energy/potential", rr.Scalars(potential))
             stream.log("energy/total", rr.Scalars(kinetic + potential))
             if dissipated is not None:
-                stream.log("energy/dissipated", rr.Scalars(y[dissipated]))
+                stream.log("books/loss/dissipated", rr.Scalars(y[dissipated]))
             stream.log("energy/balance_residual", rr.Scalars(sim.residual()))
             stream.log("joints/angle", rr.Scalars(q))
             stream.log("joints/velocity", rr.Scalars(qd))
@@ -179,19 +180,18 @@ def modes():
     ]
 
 
-def energies_scalar(states, arm, gravity):
+def energies_scalar(states, sim):
     start = time.perf_counter()
+    energy = sim.energy
     for y in states:
-        q, qd = (y[0], y[1]), (y[2], y[3])
-        model.kinetic_energy(arm, q, qd) + model.potential_energy(arm, q, gravity)
+        energy(y)
     return time.perf_counter() - start
 
 
-def energies_vectorised(states, arm, gravity):
+def energies_vectorised(states, sim):
     start = time.perf_counter()
-    array = np.array(states)
-    kinetic, potential = readouts.energies(arm, gravity, *array[:, :4].T)
-    kinetic + potential
+    kinetic, stored = readouts.energies(readouts.Snapshot(sim), np.array(states))
+    kinetic + sum(stored.values())
     return time.perf_counter() - start
 
 
@@ -276,14 +276,12 @@ def main() -> None:
     for _ in range(steps):
         sim.step()
         states.append(sim.state)
-    scalar = min(energies_scalar(states, sim.arm, scene.gravity)
-                 for _ in range(args.repeat)) / steps
-    vector = min(energies_vectorised(states, sim.arm, scene.gravity)
-                 for _ in range(args.repeat)) / steps
+    scalar = min(energies_scalar(states, sim) for _ in range(args.repeat)) / steps
+    vector = min(energies_vectorised(states, sim) for _ in range(args.repeat)) / steps
     print()
     print(f"{'energy readouts (T, V, E) of one step':44s} {'µs/step':>9s}")
-    print(f"{'model.kinetic/potential_energy per step':44s} {scalar * 1e6:9.3f}")
-    print(f"{'telemetry.energies over a batch, per row':44s} {vector * 1e6:9.3f}")
+    print(f"{'Simulator.energy per step':44s} {scalar * 1e6:9.3f}")
+    print(f"{'readouts.energies over a batch, per row':44s} {vector * 1e6:9.3f}")
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ import pytest
 from arm_sim_ros.physics import batch as batch_module
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics.batch import Batch
-from arm_sim_ros.physics.scene import SceneError, load_scene
+from arm_sim_ros.physics.scene import SceneError, load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 RNG = np.random.default_rng(7)
@@ -119,3 +119,76 @@ def test_batch_command_reports_throughput_and_agreement(capsys):
 def test_batch_command_refuses_bad_counts(capsys):
     assert cli.main(["batch", "--count", "0"]) == 2
     assert "at least 1" in capsys.readouterr().err
+
+
+# --- Every effect ----------------------------------------------------------------------
+
+def full_state(scene, steps, command=None):
+    """Every state entry of one arm: q, q̇, extra states (winding currents), every channel."""
+    sim = Simulator(scene)
+    if command is not None:
+        sim.set_command(*command)
+    for _ in range(steps):
+        sim.step()
+    return sim, np.array(sim.state)
+
+
+@pytest.mark.parametrize("name", preset_names())
+def test_batch_equals_single_arm_for_every_preset_and_every_state_entry(name):
+    scene = load_scene(name)
+    q = np.asarray(scene.initial_positions) + RNG.uniform(-0.5, 0.5, (3, 2))
+    qd = RNG.uniform(-1, 1, (3, 2))
+    command = RNG.uniform(-2, 2, 2)
+    b = Batch(scene, q, qd)
+    b.set_command(*command)
+    b.run(100)
+    for i in range(3):
+        sim, expected = full_state(scene.replace(initial_positions=tuple(q[i]),
+                                                 initial_velocities=tuple(qd[i])), 100, command)
+        assert (b.channels, b.extra, b.substeps) == (sim.channels, sim.extra, sim.substeps)
+        got = np.array([a[i] for a in b.state])
+        assert np.max(np.abs(got - expected)) <= 1e-12, (name, i, got - expected)
+
+
+@pytest.mark.parametrize("policy", ["gravity_compensation", "frozen_gravity"])
+def test_batch_controller_model_believes_each_arms_own_unnamed_values(policy):
+    """Unnamed controller_model keys are each arm's true values (per-arm gravity and links),
+    not the batch's placeholder structure."""
+    scene = load_scene("wrong_payload_model").replace(
+        policy=policy, controller_model={"payload_mass": 0.0, "link_masses": [1.2, 0.9]})
+    params = {"gravity": np.array([9.81, 3.7, 0.0]),
+              "link_lengths": RNG.uniform(0.7, 1.3, (3, 2)),
+              "com_distances": RNG.uniform(0.3, 0.6, (3, 2))}
+    b = Batch(scene, count=3, **params)
+    b.run(100)
+    for i in range(3):
+        arm = scene.replace(gravity=float(params["gravity"][i]),
+                            link_lengths=tuple(params["link_lengths"][i]),
+                            com_distances=tuple(params["com_distances"][i]))
+        sim, expected = full_state(arm, 100)
+        # (an arm without gravity compensates nothing: its simulator has no work channel,
+        # the batch's stays 0 for it)
+        got = dict(zip(("q1", "q2", "qd1", "qd2") + b.extra + b.channels, (a[i] for a in b.state)))
+        expected = dict(zip(sim.state_names, expected))
+        assert max(abs(got[k] - expected.get(k, 0.0)) for k in got) <= 1e-12, (i, got, expected)
+
+
+def test_batch_sub_steps_for_its_stiffest_arm():
+    """Per-arm damping beyond the scene's: the batch takes the stiffest arm's plan, stays
+    finite, and equals that arm's own simulator; the others stay within RK4's error."""
+    scene = load_scene("release")
+    damping = np.array([0.0, 5.0, 100.0])
+    b = Batch(scene, count=3, damping=damping)
+    b.run(50)
+    assert np.isfinite(np.stack(b.state)).all()
+    stiffest, expected = full_state(scene.replace(damping=100.0), 50)
+    assert b.substeps == stiffest.substeps > 1
+    assert np.max(np.abs(np.array([a[2] for a in b.state]) - expected)) <= 1e-12
+    for i in (0, 1):     # RK4 at h = 0.01 is ~1e-6 rad from exact on the release
+        _, own = full_state(scene.replace(damping=float(damping[i])), 50)
+        assert np.max(np.abs(np.array([a[i] for a in b.state])[:4] - own[:4])) <= 1e-5
+
+
+def test_batch_of_arms_sharing_parameters_keeps_the_scenes_plan():
+    scene = load_scene("geared_arm")
+    assert Batch(scene, count=4).substeps == Simulator(scene).substeps == 3

@@ -1,7 +1,9 @@
 """Rerun recordings read back and compared with the core, value for value.
 
 Each test writes a recording, reads it with rr.chunk.RrdReader and checks it against a
-Simulator run of the same scene: channel set, time column, values to 1e-12.
+Simulator run of the same scene: entity set, time column, values to 1e-12. What the core
+says a row holds (Row) comes from Simulator.sample() and each effect's own scalar
+stored_energy, never from the recorder's vectorised readouts.
 """
 import math
 import socket
@@ -23,9 +25,29 @@ from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.node import parameters as node_params
 
 TOL = 1e-12
-ALL_CHANNELS = {"energy/kinetic", "energy/potential", "energy/total", "energy/dissipated",
-                "work/actuator", "energy/balance_residual", "joints/angle", "joints/velocity",
-                "joints/torque", "arm/links", "arm/joints", "arm/tip_trace", "events"}
+# Every scene's entities; each effect adds its own (SCENES), and an absent one adds none.
+ALWAYS = {"energy/total", "energy/balance_residual", "books/stored/kinetic", "joints/angle",
+          "joints/velocity", "arm/links", "arm/joints", "arm/tip_trace", "events"}
+GRAVITY, WORK, TORQUE = "books/stored/gravity", "books/input/work", "joints/torque"
+KINETIC = "books/stored/kinetic"   # T − T₀: T itself for a scene that starts at rest
+WINDINGS = {"books/stored/windings", "books/transfer/work", "books/input/electrical_input",
+            "books/loss/copper_loss", "joints/current", TORQUE}
+SCENES = {  # scene: the entities its effects add
+    "release": {GRAVITY},
+    "damped_release": {GRAVITY, "books/loss/dissipated"},
+    "shoulder_torque_no_gravity": {WORK, TORQUE},
+    "per_joint_damping": {GRAVITY, "books/loss/dissipated"},
+    "springs_oscillation": {"books/stored/springs"},
+    "payload_release": {GRAVITY, "books/input/payload_exchange"},
+    "geared_release": {GRAVITY},
+    "motor_windings_hold": {GRAVITY} | WINDINGS,
+    "effort_limited_hold": {GRAVITY, WORK, TORQUE},
+    "wrong_payload_model": {GRAVITY, WORK, TORQUE, "books/input/payload_exchange"},
+    "geared_arm": {GRAVITY, "books/loss/dissipated", "books/input/payload_exchange"} | WINDINGS,
+}
+EFFECT_PRESETS = ["per_joint_damping", "springs_oscillation", "payload_release",
+                  "geared_release", "motor_windings_hold", "effort_limited_hold",
+                  "wrong_payload_model", "geared_arm"]
 
 
 def read_back(path):
@@ -68,46 +90,88 @@ def blueprint_rows(path):
     return rows
 
 
+def stored_parts(sim, state) -> dict:
+    """E at `state` split into kinetic and each storing effect's part, from the core's
+    scalar functions (model.kinetic_energy, each effect's stored_energy)."""
+    q, qd, extra = state[0:2], state[2:4], state[4:4 + len(sim.extra)]
+    parts = {"kinetic": model.kinetic_energy(sim.arm, q, qd)}
+    for effect in sim.dynamics.active:
+        if readouts.stores_energy(effect):
+            own = tuple(extra[sim.extra.index(name)] for name in effect.state)
+            parts[readouts.STORED_PARTS[effect.name]] = effect.stored_energy(sim.arm, q, own)
+    return parts
+
+
+class Row:
+    """The core's sample at one step, and every readout the recording should hold there
+    ({entity path: values}); `start`: E(0)'s parts, which the books count changes from."""
+
+    def __init__(self, sim, start):
+        s = self.sample = sim.sample()
+        kinds = dict(zip(sim.channels, sim.dynamics.channel_kinds))
+        self.values = {
+            "energy/total": [s.total], "energy/balance_residual": [s.residual],
+            "joints/angle": list(s.q), "joints/velocity": list(s.qd)}
+        for part, value in stored_parts(sim, sim.state).items():
+            self.values[f"books/stored/{part}"] = [value - start[part]]
+        for name, value in s.channels.items():     # every channel by name
+            self.values[f"books/{kinds[name]}/{name}"] = [value]
+        if any(effect.drives for effect in sim.dynamics.active):
+            self.values["joints/torque"] = list(s.tau)
+        if sim.extra:
+            self.values["joints/current"] = [s.extra["i1"], s.extra["i2"]]
+
+    def __getattr__(self, name):
+        return getattr(self.sample, name)
+
+
+class Core:
+    """A Simulator's rows as the recording should hold them: take() after each step,
+    restart() after a reset (the books count from the new E(0))."""
+
+    def __init__(self, sim):
+        self.sim, self.rows = sim, []
+        self.restart()
+
+    def restart(self):
+        self.start = stored_parts(self.sim, self.sim.state)
+        self.take()
+
+    def take(self, *_):
+        self.rows.append(Row(self.sim, self.start))
+
+
 def record(scene, path, steps=None, on_step=None, **options):
     """Run `scene` for `steps` (default: its duration) with a recorder; return the core's
-    samples of the same run (initial row included) and the recorder."""
+    rows of the same run (initial row included) and the recorder."""
     sim = Simulator(scene)
     recorder = telemetry.make_recorder(scene, path=str(path), **options)
     recorder.start(sim)
-    samples = [sim.sample()]
+    core = Core(sim)
     for k in range(scene.steps_for(scene.duration) if steps is None else steps):
         if on_step is not None:
             on_step(sim, k)
         sim.step()
         recorder.step(sim)
-        samples.append(sim.sample())
+        core.take()
     recorder.finish(sim)
-    return samples, recorder
+    return core.rows, recorder
 
 
 def scalars(entity):
     return np.array(entity["Scalars:scalars"])
 
 
-def assert_equals_core(columns, samples):
-    """Time column = simulated time; every readout = the core's sample() to 1e-12."""
-    expected = {
-        "energy/kinetic": [[s.kinetic] for s in samples],
-        "energy/potential": [[s.potential] for s in samples],
-        "energy/total": [[s.total] for s in samples],
-        "energy/balance_residual": [[s.residual] for s in samples],
-        "joints/angle": [list(s.q) for s in samples],
-        "joints/velocity": [list(s.qd) for s in samples],
-        "energy/dissipated": [[s.dissipated] for s in samples],
-        "work/actuator": [[s.work] for s in samples],
-        "joints/torque": [list(s.tau) for s in samples],
-    }
-    times = [round(s.t * 1e9) for s in samples]
-    for path, values in expected.items():
-        if path not in columns:
-            continue
-        assert columns[path]["sim_time"] == times, path
-        assert np.max(np.abs(scalars(columns[path]) - np.array(values))) <= TOL, path
+def assert_equals_core(columns, rows):
+    """Every readout the core has is recorded, at simulated time, equal to 1e-12 (of its
+    magnitude, for the tens of joules a motor burns)."""
+    for path in set().union(*(row.values for row in rows)):
+        held = [row for row in rows if path in row.values]   # a grasp adds a channel mid-run
+        assert path in columns, path
+        assert columns[path]["sim_time"] == [round(row.t * 1e9) for row in held], path
+        expected = np.array([row.values[path] for row in held])
+        error = np.abs(scalars(columns[path]) - expected)
+        assert np.all(error <= TOL * np.maximum(1.0, np.abs(expected))), (path, error.max())
 
 
 def test_damped_release_reads_back_equal_to_the_core(tmp_path):
@@ -115,30 +179,73 @@ def test_damped_release_reads_back_equal_to_the_core(tmp_path):
     samples, _ = record(scene, tmp_path / "damped.rrd")
     columns = read_back(tmp_path / "damped.rrd")
     assert len(samples) == 201
-    assert columns["energy/kinetic"]["sim_time"][-1] == 2_000_000_000   # 2 s of simulated time
+    assert columns[KINETIC]["sim_time"][-1] == 2_000_000_000   # 2 s of simulated time
     assert_equals_core(columns, samples)
     # Damping takes energy out: total falls while dissipated rises, residual stays tiny.
-    total, dissipated = scalars(columns["energy/total"]), scalars(columns["energy/dissipated"])
+    total, dissipated = scalars(columns["energy/total"]), scalars(columns["books/loss/dissipated"])
     assert total[-1, 0] < -6.0 and dissipated[-1, 0] > 6.0
     assert np.max(np.abs(scalars(columns["energy/balance_residual"]))) < 1e-5
 
 
-@pytest.mark.parametrize("name, present, absent", [
-    ("release", set(), {"energy/dissipated", "work/actuator", "joints/torque"}),
-    ("damped_release", {"energy/dissipated"}, {"work/actuator", "joints/torque"}),
-    ("shoulder_torque_no_gravity", {"work/actuator", "joints/torque"}, {"energy/dissipated"}),
-])
-def test_channels_follow_the_scenes_effects(tmp_path, name, present, absent):
-    scene = load_scene(name)
-    samples, _ = record(scene, tmp_path / f"{name}.rrd")
-    columns = read_back(tmp_path / f"{name}.rrd")
-    always = {"energy/kinetic", "energy/potential", "energy/total", "energy/balance_residual",
-              "joints/angle", "joints/velocity", "arm/links", "arm/joints", "arm/tip_trace",
-              "events"}
-    assert set(columns) == always | present
-    assert not set(columns) & absent
-    assert set(columns) <= ALL_CHANNELS
-    assert_equals_core(columns, samples)
+def commands_for(scene):
+    """For the command policies: a new held command every 25 steps, large enough to meet
+    geared_arm's effort and voltage limits; None for the others."""
+    if not scene.policy.startswith("command"):
+        return None
+
+    def commands(sim, k):
+        if k % 25 == 0:
+            sim.set_command(30.0 * math.sin(k / 40.0), -25.0 + k / 10.0)
+    return commands
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """name -> (rows, columns, path) of a recording of that scene (at most 0.3 s), made
+    once for the module's tests."""
+    made = {}
+
+    def get(name):
+        if name not in made:
+            scene = load_scene(name)
+            scene = scene.replace(duration=min(scene.duration, 0.3))
+            path = tmp_path_factory.mktemp("scenes") / f"{name}.rrd"
+            rows, _ = record(scene, path, on_step=commands_for(scene))
+            made[name] = rows, read_back(path), path
+        return made[name]
+    return get
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_every_effect_records_its_channels_by_name_equal_to_the_core(recordings, name):
+    """Each channel by name (J), each stored energy, the winding currents (A) and the
+    torque the joints receive, row for row as the Simulator has them; an effect the scene
+    lacks has no entity (no copper loss without windings, no dissipation without damping)."""
+    rows, columns, _ = recordings(name)
+    assert set(columns) == ALWAYS | SCENES[name]
+    assert_equals_core(columns, rows)
+    sim = Simulator(load_scene(name))
+    for channel in sim.channels:     # by name, whatever its kind
+        assert sum(p.endswith(f"/{channel}") and p.startswith("books/") for p in columns) == 1
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_the_books_view_sums_to_the_residual(recordings, name):
+    """'Where did the energy go': Σ stored changes − Σ inputs + Σ losses = the residual,
+    row by row, over exactly the series the saved view shows."""
+    rows, columns, path = recordings(name)
+    (shown,) = [r["ViewContents:query"] for r in blueprint_rows(path).values()
+                if "energy/balance_residual" in r.get("ViewContents:query", [])]
+    sign = {"stored": 1.0, "loss": 1.0, "input": -1.0}
+    kinds = {p: p.split("/")[1] for p in shown if p.startswith("books/")}
+    assert set(kinds.values()) <= set(sign)          # transfers are not in the books
+    assert {p for p in columns if p.startswith("books/") and "/transfer/" not in p} == set(kinds)
+    total = sum(sign[kind] * scalars(columns[p])[:, 0] for p, kind in kinds.items())
+    residual = scalars(columns["energy/balance_residual"])[:, 0]
+    scale = max(1.0, max(np.max(np.abs(scalars(columns[p]))) for p in kinds))
+    assert np.max(np.abs(total - residual)) <= TOL * scale
+    # ...and the residual is the core's: E(t) − E(0) − inputs + losses.
+    assert np.allclose(residual, [row.residual for row in rows], atol=TOL * scale, rtol=0)
 
 
 @pytest.mark.parametrize("name, overrides", [
@@ -158,24 +265,27 @@ def test_torque_and_work_equal_the_core_for_every_policy(tmp_path, name, overrid
 
     samples, _ = record(scene, tmp_path / "policy.rrd", on_step=commands)
     columns = read_back(tmp_path / "policy.rrd")
-    assert {"work/actuator", "joints/torque"} <= set(columns)
+    assert {WORK, TORQUE} <= set(columns)
     assert_equals_core(columns, samples)
-    assert np.max(np.abs(scalars(columns["work/actuator"]))) > 0.0
+    assert np.max(np.abs(scalars(columns[WORK]))) > 0.0
 
 
 def test_blueprint_is_saved_paused_on_simulated_time(tmp_path):
     record(load_scene("release"), tmp_path / "release.rrd")
     rows = blueprint_rows(tmp_path / "release.rrd")
     names = {r.get("ViewBlueprint:display_name", [None])[0] for r in rows.values()}
-    assert {"Energy (J)", "Work, dissipation and balance residual (J)", "Events",
-            "Joint angle (rad)", "Joint velocity (rad/s)"} <= names
+    assert {"Energy E (J)", "Events", "Effects the scene calls for", "Joint angle (rad)",
+            "Joint velocity (rad/s)"} <= names
     assert any(name.startswith("Arm") for name in names if name)
-    assert "Joint applied torque (N m)" not in names        # no actuator in this scene
+    assert any(name.startswith("Where did the energy go?") and "(J)" in name
+               for name in names if name)
+    assert not {"Joint torque received (N m)", "Joint winding current (A)"} & names
     assert rows["/time_panel"]["TimePanelBlueprint:timeline"] == ["sim_time"]
     assert rows["/time_panel"]["TimePanelBlueprint:play_state"] == [1]     # paused
     queries = [r["ViewContents:query"] for r in rows.values() if "ViewContents:query" in r]
-    assert ["energy/kinetic", "energy/potential", "energy/total"] in queries
-    assert ["energy/balance_residual"] in queries            # no damping, no actuator here
+    assert ["energy/total"] in queries
+    # no damping, no actuator here: the books are T, V and the residual
+    assert ["books/stored/kinetic", "books/stored/gravity", "energy/balance_residual"] in queries
 
 
 def test_series_are_named_and_coloured(tmp_path):
@@ -187,9 +297,10 @@ def test_series_are_named_and_coloured(tmp_path):
         if chunk.is_static and "SeriesLines:names" in batch.schema.names:
             styles[chunk.entity_path.lstrip("/")] = (batch.column("SeriesLines:names")[0].as_py(),
                                                      batch.column("SeriesLines:colors")[0].as_py())
-    assert set(styles) == {"energy/kinetic", "energy/potential", "energy/total",
-                           "energy/dissipated", "energy/balance_residual", "joints/angle",
-                           "joints/velocity"}
+    assert set(styles) == {"energy/total", "energy/balance_residual", KINETIC, GRAVITY,
+                           "books/loss/dissipated", "joints/angle", "joints/velocity"}
+    assert styles["books/loss/dissipated"][0] == ["loss: damping ∫d·q̇²dt"]
+    assert styles["energy/total"][0] == ["total E = kinetic + gravity"]
     for names, colors in styles.values():
         assert all(names) and len(names) == len(colors)
         for rgba in colors:   # visible on the dark theme: no channel darker than mid grey
@@ -199,10 +310,21 @@ def test_series_are_named_and_coloured(tmp_path):
 def test_series_names_use_only_glyphs_the_viewer_can_draw():
     """The viewer's font lacks e.g. ᵀ, and a missing glyph crashes it (seen in 0.41)."""
     drawn = set("∫τ·²₀−") | {"\u0307"}      # each seen rendered in a headless screenshot
-    names = [name for name, _ in blueprint.ENERGY_SERIES.values()]
-    names += [n for title, series in blueprint.JOINT_SERIES.values() for n in (title, *series)]
+    ascii_ = {chr(c) for c in range(32, 127)}
+    assert blueprint.DRAWN <= drawn
+    names = [n for title, series in blueprint.JOINT_SERIES.values() for n in (title, *series)]
+    for name in SCENES:
+        sim = Simulator(load_scene(name))
+        snap = readouts.Snapshot(sim)
+        styled = blueprint.series(snap)       # a style for each readout, none for another
+        assert set(styled) == set(readouts.channel_values(snap, np.array([sim.state]),
+                                                          np.zeros((1, 2))))
+        names += [n for series, _, _ in styled.values() for n in series]
+        names += [blueprint.joint_series(p)[0] for p in blueprint.joint_paths(snap)]
+        names += blueprint.effects_document(snap).splitlines()
     for name in names:
-        assert set(name) <= drawn | {chr(c) for c in range(32, 127)}, name
+        assert set(name) <= drawn | ascii_, name
+    assert blueprint.drawable("E = q̇ᵀMq̇/2, Ø 43.5 mm") == "E = q̇TMq̇/2, ? 43.5 mm"
 
 
 def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
@@ -271,7 +393,7 @@ def test_after_a_reset_the_timeline_runs_on_like_the_nodes_stamps(tmp_path):
         samples.append(sim.sample())
     recorder.finish(sim)
     columns = read_back(tmp_path / "reset.rrd")
-    kinetic = columns["energy/kinetic"]
+    kinetic = columns[KINETIC]
     h_ns = round(0.01 * 1e9)
     # Each run starts where the last ended (the reset shows as one instant with two rows).
     assert kinetic["sim_time"] == ([k * h_ns for k in range(31)] + [k * h_ns for k in range(30, 51)]
@@ -298,9 +420,9 @@ def test_a_new_simulator_is_recorded_with_its_own_parameters(tmp_path):
             samples.append(sim.sample())
     recorder.finish(second)
     columns = read_back(tmp_path / "swap.rrd")
-    assert np.max(np.abs(scalars(columns["energy/potential"])[:, 0]
-                         - [s.potential for s in samples])) <= TOL
-    assert len(columns["energy/dissipated"]["sim_time"]) == 25
+    assert np.max(np.abs(scalars(columns["energy/total"])[:, 0]
+                         - [s.total for s in samples])) <= TOL
+    assert len(columns["books/loss/dissipated"]["sim_time"]) == 25
 
 
 def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
@@ -377,22 +499,119 @@ def test_viewer_addresses():
     assert not sinks.viewer_reachable(url)
 
 
-def test_vectorised_helpers_equal_the_models_scalar_functions():
+def test_vectorised_drawing_equals_the_models_link_points():
     arm = model.ArmParameters(link_lengths=(0.7, 1.3), link_masses=(2.0, 0.5),
                               com_distances=(0.3, 0.9), com_inertias=(0.05, 0.2))
-    rng = np.random.default_rng(4)
-    q1, q2, u1, u2 = rng.uniform(-7.0, 7.0, size=(4, 500))
-    kinetic, potential = readouts.energies(arm, 9.81, q1, q2, u1, u2)
-    torques = readouts.gravity_torques(arm, 9.81, q1, q2)
+    q1, q2 = np.random.default_rng(4).uniform(-7.0, 7.0, size=(2, 500))
     elbow, tip = readouts.drawing_points(arm, q1, q2)
     for i in range(500):
-        q, qd = (q1[i], q2[i]), (u1[i], u2[i])
-        scale = 1.0 + abs(model.kinetic_energy(arm, q, qd))
-        assert abs(kinetic[i] - model.kinetic_energy(arm, q, qd)) <= TOL * scale
-        assert abs(potential[i] - model.potential_energy(arm, q, 9.81)) <= TOL
-        assert np.allclose(torques[i], model.gravity_torque(arm, q, 9.81), atol=TOL, rtol=0)
-        _, (ex, ey), (tx, ty) = model.link_points(arm, q)
+        _, (ex, ey), (tx, ty) = model.link_points(arm, (q1[i], q2[i]))
         assert np.allclose([*elbow[i], *tip[i]], [ex, -ey, tx, -ty], atol=TOL, rtol=0)
+
+
+@pytest.mark.parametrize("name", EFFECT_PRESETS + ["release", "moving_gravity_compensation"])
+def test_readouts_energies_and_torque_equal_the_simulators(name):
+    """readouts.energies = Simulator.energies (kinetic with the rotors' armature; stored:
+    gravity with the payload folded in, springs, inductors) and Snapshot.joint_torque =
+    Simulator.joint_torque (after effort limits and windings), row for row over a run that
+    starts moving (q̇ = (0.8, −1.1) rad/s), so every term counts."""
+    scene = load_scene(name)
+    scene = scene.replace(duration=min(scene.duration, 0.3), initial_velocities=(0.8, -1.1))
+    sim, commands = Simulator(scene), commands_for(scene) or (lambda sim, k: None)
+    snap = readouts.Snapshot(sim)
+    states, held = [sim.state], [tuple(sim.dynamics.command)]
+    for k in range(scene.steps_for(scene.duration)):
+        commands(sim, k)
+        sim.step()
+        states.append(sim.state)
+        held.append(tuple(sim.dynamics.command))
+    rows = np.array(states)
+    kinetic, stored = readouts.energies(snap, rows)
+    torque = snap.joint_torque(rows, np.array(held)) if snap.drives else None
+    for i, state in enumerate(states):
+        core_kinetic, core_stored = sim.energies(state)
+        scale = max(1.0, abs(core_kinetic), abs(core_stored))
+        assert abs(kinetic[i] - core_kinetic) <= TOL * scale
+        assert abs(sum(v[i] for v in stored.values()) - core_stored) <= TOL * scale
+        assert abs(kinetic[i] + sum(v[i] for v in stored.values()) - sim.energy(state)) <= TOL * scale
+        if torque is not None:
+            sim.dynamics.command[:] = held[i]
+            assert np.allclose(torque[i], sim.joint_torque(state), atol=TOL, rtol=TOL)
+    assert set(stored) == set(stored_parts(sim, states[0])) - {"kinetic"}
+    if "motors" in sim.dynamics.effects and any(sim.arm.armature):   # the rotors count in T
+        bare = readouts.energies(readouts.Snapshot(Simulator(scene.replace(motors=None))), rows)[0]
+        assert np.all(kinetic[1:] > bare[1:])
+
+
+def effects_document(path):
+    """The recording's static effects document: (text, media type)."""
+    reader = rr.chunk.RrdReader(str(path))
+    for chunk in reader.stream(store=reader.recordings()[0]):
+        batch = chunk.to_record_batch()
+        if chunk.entity_path.lstrip("/") == blueprint.EFFECTS_PATH and chunk.is_static:
+            text, media_type = (batch.column(f"TextDocument:{name}")[0].as_py()
+                                for name in ("text", "media_type"))
+            return text[0], media_type[0]
+    return None
+
+
+@pytest.mark.parametrize("name, rows, absent", [
+    ("geared_arm", ["| gravity | magnitude along −y | 9.81 | m/s² |",
+                    "| actuator | policy | command_gravity_compensation |  |",
+                    "| effort_limits | limit per joint | 40, 20 | N m |",
+                    "| motors | gear_ratio | 100, 50 |  |",
+                    "|  | resistance | 0.573, 0.573 | ohm |",
+                    "|  | inductance | 0.000301, 0.000301 | H |",
+                    "|  | torque_constant | 0.0404, 0.0404 | N m/A |",
+                    "|  | voltage_limit | 24, 24 | V |",
+                    "|  | armature N²J | 0.181, 0.04525 | kg m² |",
+                    "| damping | d | 0.05 | N m s/rad |",
+                    "| payload | mass | 0.3 | kg |",
+                    "- E: kinetic + gravity + windings",
+                    "- inputs: electrical_input, payload_exchange",
+                    "- losses: copper_loss, dissipated",
+                    "- extra state: i1, i2 (A)"], ["springs", "controller_model"]),
+    ("springs_oscillation", ["| springs | stiffness | 20, 5 | N m/rad |",
+                             "|  | rest_positions | 0.5, -0.5 | rad |", "- E: kinetic + springs"],
+     ["| gravity", "| damping", "| actuator", "- inputs", "- losses"]),
+    ("wrong_payload_model", ["| controller_model | payload_mass | 0 | kg |",
+                             "| payload | mass | 0.5 | kg |"], ["motors"]),
+    ("per_joint_damping", ["| damping | d per joint | 0.5, 0.05 | N m s/rad |"], ["actuator"]),
+])
+def test_the_effects_the_scene_calls_for_are_one_static_markdown_document(recordings, name,
+                                                                           rows, absent):
+    _, columns, path = recordings(name)
+    text, media_type = effects_document(path)
+    assert media_type == "text/markdown"
+    assert blueprint.EFFECTS_PATH not in columns          # static: logged once, no timeline
+    lines = text.splitlines()
+    effects = Simulator(load_scene(name)).dynamics.effects
+    listed = [line.split("|")[1].strip() for line in lines if line.startswith("| ")]
+    assert [e for e in listed if e and e != "effect"] == list(effects)
+    for row in rows:
+        assert row in lines, row
+    for word in absent:
+        assert word not in text
+    views = blueprint_rows(path)
+    assert any(r.get("ViewBlueprint:class_identifier") == ["TextDocument"] for r in views.values())
+
+
+def test_a_payload_grasped_mid_run_keeps_the_books_and_reads_each_row_as_taken(tmp_path):
+    """Simulator.set_payload rebuilds the dynamics (a payload_exchange channel appears): the
+    rows before read with the old layout, those after with the new, and the books keep
+    counting from the run's E(0), so they still sum to the residual."""
+    scene = load_scene("damped_release").replace(duration=0.4)
+    path = tmp_path / "grasp.rrd"
+    rows, _ = record(scene, path, on_step=lambda sim, k: k == 20 and sim.set_payload(0.5))
+    columns = read_back(path)
+    assert_equals_core(columns, rows)
+    exchange = columns["books/input/payload_exchange"]
+    assert exchange["sim_time"][0] == round(0.21 * 1e9) and len(exchange["sim_time"]) == 20
+    assert abs(scalars(exchange)[0, 0]) > 0.01          # the grasp took energy: booked
+    books = scalars(columns[KINETIC])[:, 0] + scalars(columns[GRAVITY])[:, 0] \
+        + scalars(columns["books/loss/dissipated"])[:, 0]
+    books[21:] -= scalars(exchange)[:, 0]
+    assert np.max(np.abs(books - scalars(columns["energy/balance_residual"])[:, 0])) <= TOL
 
 
 def test_the_recording_verifies(tmp_path):
@@ -409,11 +628,10 @@ def test_arm_sim_run_writes_the_recording(tmp_path, capsys):
     path = tmp_path / "cli.rrd"
     assert cli.main(["run", "--scene", "damped_release", "--rerun", str(path), "--json"]) == 0
     columns = read_back(path)
-    reference = Simulator(load_scene("damped_release"))
-    samples = [reference.sample()]
-    reference.run(2.0, lambda sim: samples.append(sim.sample()))
-    assert_equals_core(columns, samples)
-    assert "energy/dissipated" in columns and "work/actuator" not in columns
+    core = Core(Simulator(load_scene("damped_release")))
+    core.sim.run(2.0, core.take)
+    assert_equals_core(columns, core.rows)
+    assert "books/loss/dissipated" in columns and WORK not in columns
 
 
 def test_arm_sim_run_refuses_an_unwritable_recording_before_running(tmp_path, capsys):
@@ -437,18 +655,17 @@ def run_node(node_core, config, ticks, command=None):
     tick k if given; return its log, the core's samples and the recording read back."""
     log = Log()
     core = node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0, start_stamp_ns=0)
-    reference = Simulator(config.scene)
-    samples = [reference.sample()]
+    reference = Core(Simulator(config.scene))
     for k in range(ticks):
         if command is not None:
             core.on_command(command(k))
-            reference.set_command(*command(k))
+            reference.sim.set_command(*command(k))
         core.tick(0.0)
         for _ in range(config.steps_per_tick):
-            reference.step()
-            samples.append(reference.sample())
+            reference.sim.step()
+            reference.take()
     core.finish()
-    return log, samples, read_back(config.values["rerun_path"])
+    return log, reference.rows, read_back(config.values["rerun_path"])
 
 
 def test_the_node_writes_a_recording_in_process(tmp_path):
@@ -458,7 +675,7 @@ def test_the_node_writes_a_recording_in_process(tmp_path):
                                            "publish_rate": 50.0})
     log, samples, columns = run_node(node_core, config, ticks=25)
     assert_equals_core(columns, samples)
-    assert columns["energy/kinetic"]["sim_time"][-1] == round(0.5 * 1e9)
+    assert columns[KINETIC]["sim_time"][-1] == round(0.5 * 1e9)
     assert any("start" in text for text in columns["events"]["TextLog:text"])
     assert not [text for level, text in log.lines if level in ("warning", "error")]
 
@@ -474,7 +691,7 @@ def test_the_node_records_each_ticks_command_with_its_steps(tmp_path):
     _, samples, columns = run_node(node_core, config, ticks=12,
                                    command=lambda k: [math.sin(k), 0.3 * k - 1.0])
     assert config.steps_per_tick == 5
-    assert {"work/actuator", "joints/torque", "energy/dissipated"} <= set(columns)
+    assert {WORK, TORQUE, "books/loss/dissipated"} <= set(columns)
     assert_equals_core(columns, samples)
 
 
@@ -547,9 +764,9 @@ def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_orde
     core.finish()
     columns = read_back(path)
     h_ns = round(config.scene.step_size * 1e9)
-    assert columns["energy/kinetic"]["sim_time"] == (
+    assert columns[KINETIC]["sim_time"] == (
         [k * h_ns for k in range(18)] + [k * h_ns for k in range(17, 24)])
-    assert np.max(np.abs(scalars(columns["energy/kinetic"])[:, 0] - kinetic)) <= TOL
+    assert np.max(np.abs(scalars(columns[KINETIC])[:, 0] - kinetic)) <= TOL
     assert np.max(np.abs(scalars(columns["joints/torque"]) - torque)) <= TOL
     # A line lands on the next step recorded: the refusal after step 7 on step 8; the
     # restart's own line on its initial row, the node's reason on the step after it.

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .dynamics import build_dynamics
-from .effects import ControllerModel, Damping, Gravity
+from .effects import Damping, Gravity
 from .integrators import INTEGRATORS, compile_step
 from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
@@ -26,6 +26,7 @@ CHUNK = 32768                 # arms per chunk: a few hundred KB per array, stay
 PAIR_PARAMETERS = ("link_lengths", "link_masses", "com_distances", "com_inertias",
                    "constant_torque")
 SCALAR_PARAMETERS = ("gravity", "damping")
+LINK_PARAMETERS = PAIR_PARAMETERS[:4]
 
 
 def _per_arm(name: str, value, count: int, pair: bool) -> np.ndarray:
@@ -121,18 +122,15 @@ class Batch:
             per_arm["damping"] = Damping(v["damping"])
         for effect in dynamics.active:
             constants.update(per_arm.get(effect.name, effect).constants(arm))
+        # The gravity torque the compensating policies believe, per arm (the structure's
+        # placeholder gravity must not leak into the controller's model).
+        k1, k2, gravity = _believed_gravity(scene, v, arm)
+        if "GC1" in constants:
+            constants["GC1"], constants["GC2"] = gravity * k1, gravity * k2
         if scene.policy == "constant":
             constants["TORQUE1"], constants["TORQUE2"] = v["constant_torque"].T
         elif scene.policy == "frozen_gravity":
-            # g(q0) per arm, as model.gravity_torque computes it for one arm (the believed
-            # arm's where the controller has a model of its own).
-            believed = scene.controller_model and ControllerModel(
-                scene.links, scene.gravity, scene.payload["mass"] if scene.payload else 0.0,
-                **scene.controller_model)
-            if believed:
-                (k1, k2), gravity = believed.arm.gravity_coefficients, believed.gravity
-            else:
-                (k1, k2), gravity = arm.gravity_coefficients, v["gravity"]
+            # g(q0) per arm, as model.gravity_torque computes it for one arm.
             g2 = gravity * k2 * np.cos(q0[:, 0] + q0[:, 1])
             constants["TORQUE1"], constants["TORQUE2"] = gravity * k1 * np.cos(q0[:, 0]) + g2, g2
         constants.pop("command", None)
@@ -143,7 +141,25 @@ class Batch:
                                MIN=np.minimum, MAX=np.maximum)
         self._code = compile(dynamics.source, f"<batch rhs {scene.policy}>", "exec")
         self._step = compile_step(INTEGRATORS["rk4"], len(self.channels), extra=len(self.extra))
-        self.substeps = Simulator(scene).substeps   # the same stability plan as one arm
+        self.substeps = self._worst_substeps(scene, v, arm)
+
+    def _worst_substeps(self, scene: Scene, v: dict, arm) -> int:
+        """The single-arm stability plan of the stiffest arm. Every effect's stiffness grows
+        with Lambda (the largest eigenvalue of M^-1 over all elbow angles) and with damping,
+        so the arm with the largest Lambda, given the largest damping, bounds them all; it is
+        each arm's own plan when the arms share their links or their damping."""
+        a, b, d, m22 = arm.mass_constants
+        worst = 0.0
+        for c in (1.0, -1.0):                       # full extension and full fold
+            m11, m12 = a + 2.0 * b * c, d + b * c
+            inverse = ((0.5 * (m11 + m22) + np.hypot(0.5 * (m11 - m22), m12))
+                       / (m11 * m22 - m12 * m12))
+            worst = np.maximum(worst, np.broadcast_to(inverse, (self.count,)))
+        i = int(np.argmax(worst))
+        stiffest = scene.replace(**{name: tuple(v[name][i]) for name in LINK_PARAMETERS})
+        if not self._shared_damping:
+            stiffest = stiffest.replace(damping=float(v["damping"].max()))
+        return Simulator(stiffest).substeps
 
     def reset(self) -> None:
         self.state = [a.copy() for a in self._initial] + [
@@ -217,20 +233,38 @@ class _ArmArrays(SimpleNamespace):
     mass_constants = property(ArmParameters.mass_constants.fget)
 
 
-def _arm_arrays(v: dict, scene: Scene | None = None) -> _ArmArrays:
-    """The per-arm links, with the scene's payload folded in and its motors' armature."""
-    links = {name: (v[name][:, 0], v[name][:, 1])
-             for name in ("link_lengths", "link_masses", "com_distances", "com_inertias")}
+def _arm_arrays(v: dict, scene: Scene | None = None, payload: float = 0.0) -> _ArmArrays:
+    """The per-arm links, with the scene's payload (or `payload`) folded in and its motors'
+    armature."""
+    links = {name: (v[name][:, 0], v[name][:, 1]) for name in LINK_PARAMETERS}
     armature = (0.0, 0.0)
     if scene is not None and scene.payload is not None:
+        payload = scene.payload["mass"]
+    if (scene is not None and scene.payload is not None) or payload != 0.0:
         folded = fold_payload(links["link_lengths"][1], links["link_masses"][1],
-                              links["com_distances"][1], links["com_inertias"][1],
-                              scene.payload["mass"])
+                              links["com_distances"][1], links["com_inertias"][1], payload)
         for name, value in zip(("link_masses", "com_distances", "com_inertias"), folded):
             links[name] = (links[name][0], value)
     if scene is not None and scene.motors is not None:
         armature = scene.arm.armature
     return _ArmArrays(**links, armature=armature)
+
+
+def _believed_gravity(scene: Scene, v: dict, arm: _ArmArrays):
+    """(k1, k2, gravity) per arm of the gravity torque the compensating policies believe:
+    the controller model's named values (effects/controller_model.py), each arm's own for
+    the rest."""
+    believed = scene.controller_model
+    if believed is None:
+        return (*arm.gravity_coefficients, v["gravity"])
+    named = {name: np.broadcast_to(np.asarray(believed[name], dtype=float), v[name].shape)
+             for name in ("link_lengths", "link_masses", "com_distances")
+             if believed.get(name) is not None}
+    payload = believed.get("payload_mass")
+    if payload is None:
+        payload = scene.payload["mass"] if scene.payload is not None else 0.0
+    gravity = v["gravity"] if believed.get("gravity") is None else believed["gravity"]
+    return (*_arm_arrays(v | named, payload=payload).gravity_coefficients, gravity)
 
 
 def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0) -> dict:

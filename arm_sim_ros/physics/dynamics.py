@@ -53,6 +53,20 @@ class Dynamics:
         """(tau1, tau2) the joints receive at `state` (after effort limits and windings)."""
         return self.torque_function(*state[:4 + len(self.extra)])
 
+    def driver_check(self):
+        """q-state -> '' or what a motor driver with a voltage limit was asked beyond it, for
+        the policy's torque (after effort limits) at that state; None without such a driver."""
+        effects = {e.name: e for e in self.active}
+        motors, limits = effects.get("motors"), effects.get("effort_limits")
+        if motors is None or motors.voltage_limit is None:
+            return None
+
+        def check(state):
+            torque = effects["actuator"].requested_torque(state[0:2])
+            return motors.saturation(limits.clamp(torque) if limits is not None else torque)
+
+        return check
+
     def applied_torque(self, q):
         """(tau1, tau2) the joints receive at configuration q at rest (no extra state)."""
         return self.torque_function(q[0], q[1], 0.0, 0.0, *(0.0,) * len(self.extra))

@@ -5,7 +5,9 @@ cannot make it skip or drift.
 
 At the stability limit (stability.py) a step is split into equal sub-steps, and a step
 that would leave the finite numbers is refused: the last finite state is kept and
-`fault` says why. Both are reported in `events`.
+`fault` says why. Both are reported in `events`. A motor driver asked for more than its
+voltage limit (checked at the state each step ends in) is counted in `saturated_steps`
+and reported once, the first time, as a `saturation` event.
 """
 from __future__ import annotations
 
@@ -23,7 +25,8 @@ EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 
 @dataclass(frozen=True)
 class Event:
-    """Something the simulator did that a person should hear about (kind: substepping, fault)."""
+    """Something the simulator did that a person should hear about (kind: substepping,
+    fault, saturation)."""
 
     t: float
     kind: str
@@ -93,6 +96,7 @@ class Simulator:
         self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
         self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
         self._plan_substeps(self._tableau)
+        self._driver = self.dynamics.driver_check()    # None without a voltage limit
 
     def reset(self) -> None:
         s = self.scene
@@ -102,6 +106,7 @@ class Simulator:
         self.fault = None            # why the latest refused step was refused, None if none
         self.refused_steps = 0
         self._refused_step = -1      # index of the latest refused step
+        self.saturated_steps = 0     # steps ending where a driver asks beyond its voltage limit
         self.dynamics.command[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
 
@@ -139,18 +144,8 @@ class Simulator:
         steps): damping alone has real eigenvalues (the real-axis limit); springs and
         windings oscillate, so their bound |lambda| is kept inside the half-disk."""
         active = self.dynamics.active
-        decay = sum(e.stiffness(self.arm) for e in active)
-        oscillation = sum(e.frequency(self.arm) for e in active)
-        disk = stability.half_disk_limit(tableau) if oscillation else 0.0
-        if oscillation and disk > 0.1:     # (Euler's half-disk is empty: nothing to plan)
-            self.stability_limit = disk
-            self.stability_ratio = self.step_size * (decay + oscillation)
-            what = "h |lambda|max"
-        else:
-            self.stability_limit = stability.real_stability_limit(tableau)
-            # h times the fastest real decay any effect adds (damping's d Lambda), at any pose.
-            self.stability_ratio = self.step_size * decay
-            what = "d h lambda_max"
+        self.stability_ratio, self.stability_limit, what = stability.bound(
+            tableau, active, self.arm, self.step_size)
         adaptive = getattr(tableau, "adaptive", False)   # its own error control sub-steps
         self.substeps = (1 if adaptive else
                          stability.substeps_needed(self.stability_ratio, self.stability_limit))
@@ -185,6 +180,11 @@ class Simulator:
                 self._refuse("would make " + ", ".join(
                     f"{n} = {v}" for n, v in zip(self.state_names, y) if not isfinite(v)))
         self.steps += 1
+        over = self._driver is not None and not self.holding and self._driver(self.state)
+        if over:       # the driver was asked for more than its voltage limit: say so once
+            self.saturated_steps += 1
+            if self.saturated_steps == 1:
+                self._emit("saturation", f"motor driver saturates: {over}")
 
     def _refuse(self, why: str) -> None:
         self.fault = (f"the step to t = {(self.steps + 1) * self.step_size:.6g} s {why}; "

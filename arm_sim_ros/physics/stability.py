@@ -21,6 +21,7 @@ against Radau; treating damping implicitly (split exact damping flow) was passiv
 from __future__ import annotations
 
 from fractions import Fraction
+from functools import lru_cache
 from math import ceil, cos, hypot, pi, sin
 
 from .integrators import RK4, ButcherTableau
@@ -49,6 +50,7 @@ def stability_polynomial(tableau: ButcherTableau) -> list[Fraction]:
     return coefficients
 
 
+@lru_cache(maxsize=None)   # a tableau's constant; every Simulator build asks
 def real_stability_limit(tableau: ButcherTableau) -> float:
     """The largest x with |R(-t)| <= 1 for every t in [0, x] (2.785... for RK4)."""
     coefficients = [float(c) for c in stability_polynomial(tableau)]
@@ -68,6 +70,7 @@ def real_stability_limit(tableau: ButcherTableau) -> float:
     return lo
 
 
+@lru_cache(maxsize=None)   # ~0.16 s to compute: once per tableau, not per build
 def half_disk_limit(tableau: ButcherTableau) -> float:
     """The largest r with |R(z)| <= 1 on the whole left half-disk |z| <= r (2.61 for RK4):
     where springs and windings put oscillatory eigenvalues, not only real ones."""
@@ -112,6 +115,20 @@ def worst_stiffness(arm: ArmParameters) -> float:
     over cos q2 in [-1, 1] sits at full extension or full fold.
     """
     return max(stiffness(arm, 0.0), stiffness(arm, pi))
+
+
+def bound(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
+    """(ratio, limit, what): h times the effects' largest eigenvalue magnitude at any pose,
+    and the tableau's limit for it. Damping alone has real eigenvalues (the real-axis
+    limit); springs and windings oscillate, so their bound |lambda| is kept inside the
+    half-disk."""
+    decay = sum(e.stiffness(arm) for e in effects)
+    oscillation = sum(e.frequency(arm) for e in effects)
+    disk = half_disk_limit(tableau) if oscillation else 0.0
+    if oscillation and disk > 0.1:     # (Euler's half-disk is empty: nothing to plan)
+        return h * (decay + oscillation), disk, "h |lambda|max"
+    # h times the fastest real decay any effect adds (damping's d Lambda), at any pose.
+    return h * decay, real_stability_limit(tableau), "d h lambda_max"
 
 
 def substeps_needed(ratio: float, limit: float) -> int:

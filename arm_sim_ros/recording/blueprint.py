@@ -1,50 +1,115 @@
-"""What a Rerun recording shows and where: the timeline, the entity path of each channel,
-the series' names and colours, the arm's static styles, and the blueprint (the layout the
-viewer opens with). Nothing here logs per step; see writer.py for that.
+"""What a Rerun recording shows and where: the timeline, the series' names and colours, the
+effects document, the arm's static styles, and the blueprint (the layout the viewer opens
+with). The entity paths are readouts.py's; nothing here logs per step (see writer.py).
 
-Channels follow the scene's effects (Simulator.channels): no `energy/dissipated`
-without damping, no `work/actuator` or joint torques without an actuator.
+Everything follows the scene's effects (a readouts.Snapshot): a channel, a stored energy, a
+winding current or a joint torque the scene does not have has no entity and no series.
 """
 from __future__ import annotations
+
+import unicodedata
 
 import rerun as rr
 import rerun.blueprint as rrb
 
+from ..physics.effects import MAPPING_EFFECTS, EffortLimits
+from .readouts import KINDS, channel_path, extra_paths, stored_path
+
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 TRACE_SECONDS = 2.0              # the tip trace shows this much simulated time up to the cursor
+EFFECTS_PATH = "scene/effects"   # the effects document (markdown, static)
+
+# The viewer's font lacks many glyphs (ᵀ, say) and a missing one crashes it: names and
+# documents use ASCII and these, each seen drawn in a headless screenshot.
+DRAWN = set("∫τ·²₀−") | {"\u0307"}
 
 # Bright enough for the viewer's dark theme; one colour per readout wherever it appears.
-# Names use only glyphs the viewer's font has (a missing one, e.g. ᵀ, crashes the viewer).
-ENERGY_SERIES = {
-    "energy/kinetic": ("kinetic T", (255, 170, 60)),
-    "energy/potential": ("potential V", (90, 180, 255)),
-    "energy/total": ("total E = T + V", (245, 245, 245)),
-    "energy/dissipated": ("dissipated ∫d|q̇|²dt", (255, 95, 125)),
-    "work/actuator": ("actuator work ∫τ·q̇dt", (110, 230, 110)),
-    "energy/balance_residual": ("residual E−E₀−W+dissipated", (225, 120, 255)),
+ORANGE, BLUE, WHITE, VIOLET = (255, 170, 60), (90, 180, 255), (245, 245, 245), (225, 120, 255)
+TOTAL = "energy/total"            # E; T and each stored part are in the books (as changes)
+RESIDUAL = ("energy/balance_residual", "residual E−E₀−inputs+losses", VIOLET)
+STORED = {  # part of E: (series name of its change since t = 0, colour)
+    "kinetic": ("stored: kinetic T−T₀", ORANGE),
+    "gravity": ("stored: gravity V−V₀", BLUE),
+    "springs": ("stored: springs", (80, 225, 200)),
+    "windings": ("stored: winding inductance", (235, 225, 90)),
 }
-JOINT_SERIES = {
+CHANNELS = {  # channel: (what it integrates, colour)
+    "work": ("actuator work ∫τ·q̇dt", (110, 230, 110)),
+    "electrical_input": ("electrical ∫v·i dt", (170, 240, 70)),
+    "payload_exchange": ("payload grasp/release", (190, 190, 255)),
+    "dissipated": ("damping ∫d·q̇²dt", (255, 120, 175)),
+    "copper_loss": ("copper ∫R·i²dt", (255, 70, 70)),
+}
+TRANSFERS = {"work": "motors' work on the joints ∫τ·q̇dt"}   # with windings
+# An input is drawn wide: a loss as large as it (a held arm's copper loss) would hide it.
+WIDE, NARROW = 4.5, 2.0
+OTHER_COLOR = (200, 200, 200)
+JOINT_SERIES = {  # path: (title, series names)
     "joints/angle": ("angle (rad)", ("q1 shoulder", "q2 elbow")),
     "joints/velocity": ("velocity (rad/s)", ("q̇1 shoulder", "q̇2 elbow")),
-    "joints/torque": ("applied torque (N m)", ("τ1 shoulder", "τ2 elbow")),
+    "joints/torque": ("torque received (N m)", ("τ1 shoulder", "τ2 elbow")),
+    "joints/current": ("winding current (A)", ("i1 shoulder", "i2 elbow")),
 }
 JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
 TRACE_COLOR = (190, 190, 190)     # neutral: violet is the residual's
 HORIZON_COLOR = (100, 100, 100)
 
 
-def energy_paths(channels) -> list[str]:
-    """The scalar channels a scene with these integrated channels produces."""
-    paths = ["energy/kinetic", "energy/potential", "energy/total"]
-    if "dissipated" in channels:
-        paths.append("energy/dissipated")
-    if "work" in channels:
-        paths.append("work/actuator")
-    return paths + ["energy/balance_residual"]
+def drawable(text: str) -> str:
+    """`text` with only glyphs the viewer draws: others by their compatibility form's
+    drawable letters (ᵀ -> T), or '?'."""
+    def glyph(c):
+        if c in DRAWN or " " <= c <= "~" or c == "\n":
+            return c
+        plain = "".join(k for k in unicodedata.normalize("NFKD", c) if " " <= k <= "~")
+        return plain or "?"
+    return "".join(map(glyph, text))
 
 
-def joint_paths(channels) -> list[str]:
-    return ["joints/angle", "joints/velocity"] + (["joints/torque"] if "work" in channels else [])
+def channel_name(name: str, kind: str) -> str:
+    """A channel's series name: its kind, then what it integrates."""
+    if kind == "transfer":
+        return f"{TRANSFERS.get(name, name.replace('_', ' '))} (transfer)"
+    return f"{kind}: {CHANNELS.get(name, (name.replace('_', ' '),))[0]}"
+
+
+def series(snap) -> dict:
+    """{entity path: (series names, colours, widths)} of every scalar readout
+    readouts.channel_values computes for the scene."""
+    out = {TOTAL: ((f"total E = {' + '.join(snap.parts)}",), (WHITE,), (NARROW,))}
+    out[RESIDUAL[0]] = ((RESIDUAL[1],), (RESIDUAL[2],), (NARROW,))
+    for part in snap.parts:
+        name, color = STORED.get(part, (f"stored: {part}", OTHER_COLOR))
+        if part == "kinetic" and any(snap.arm.armature):
+            name += " (links and rotors)"
+        out[stored_path(part)] = ((name,), (color,), (NARROW,))
+    for name, kind in snap.kinds.items():
+        color = CHANNELS[name][1] if name in CHANNELS else OTHER_COLOR
+        out[channel_path(name, kind)] = ((channel_name(name, kind),), (color,),
+                                         (WIDE if kind == "input" else NARROW,))
+    for path in joint_paths(snap):
+        names = joint_series(path)[1]
+        out[path] = (names, JOINT_COLORS[:len(names)], (NARROW,) * len(names))
+    return out
+
+
+def joint_paths(snap) -> list[str]:
+    return (["joints/angle", "joints/velocity"] + (["joints/torque"] if snap.drives else [])
+            + list(extra_paths(snap.extra)))
+
+
+def joint_series(path: str):
+    name = path.rpartition("/")[2]
+    return JOINT_SERIES.get(path, (name, (name,)))
+
+
+def books_paths(snap) -> list[str]:
+    """The 'where did the energy go' view: each stored part's change, the inputs, the
+    losses, and the residual (they sum to it; transfers are not in the books)."""
+    kinds = snap.kinds.items()
+    return ([stored_path(part) for part in snap.parts]
+            + [channel_path(n, k) for kind in KINDS[:2] for n, k in kinds if k == kind]
+            + [RESIDUAL[0]])
 
 
 def reach(arm) -> float:
@@ -52,13 +117,10 @@ def reach(arm) -> float:
     return 1.1 * sum(arm.link_lengths)
 
 
-def blueprint(arm, channels, live: bool) -> rrb.Blueprint:
-    """Arm and events on the left; energy, work with residual, and joints on the right."""
-    extent = reach(arm)
-    energy = [p for p in ("energy/kinetic", "energy/potential", "energy/total", "energy/dissipated")
-              if p in energy_paths(channels)]
-    balance = [p for p in ("work/actuator", "energy/dissipated", "energy/balance_residual")
-               if p in energy_paths(channels)]
+def blueprint(snap, live: bool) -> rrb.Blueprint:
+    """Arm, effects and events on the left; the energy books, the energy levels and the
+    joints on the right."""
+    extent = reach(snap.arm)
     trace_range = rrb.VisibleTimeRanges(
         timeline=TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRACE_SECONDS),
         end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
@@ -66,17 +128,24 @@ def blueprint(arm, channels, live: bool) -> rrb.Blueprint:
         name="Arm (y up, V = 0 on the grey line)", origin="arm",
         visual_bounds=rrb.VisualBounds2D(x_range=[-extent, extent], y_range=[-extent, extent]),
         overrides={"arm/tip_trace": trace_range})
-    plots = [rrb.TimeSeriesView(name="Energy (J)", contents=energy,
-                                plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop)),
-             rrb.TimeSeriesView(name="Work, dissipation and balance residual (J)", contents=balance,
-                                plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop))]
-    joints = [rrb.TimeSeriesView(name=f"Joint {JOINT_SERIES[p][0]}", origin=p)
-              for p in joint_paths(channels)]
+    legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
+    books = rrb.TimeSeriesView(
+        name="Where did the energy go? Books since t = 0 (J): stored + losses = inputs",
+        contents=books_paths(snap), plot_legend=legend)
+    levels = rrb.TimeSeriesView(
+        name="Energy E (J)", plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftBottom),
+        contents=[TOTAL] + [channel_path(n, k) for n, k in snap.kinds.items()
+                            if k == "transfer"])
+    joints = [rrb.TimeSeriesView(name=f"Joint {joint_series(p)[0]}", origin=p)
+              for p in joint_paths(snap)]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(arm_view, rrb.TextLogView(name="Events", origin="events"),
-                         row_shares=[4, 1]),
-            rrb.Vertical(*plots, rrb.Horizontal(*joints), row_shares=[3, 3, 2]),
+            rrb.Vertical(arm_view,
+                         rrb.TextDocumentView(name="Effects the scene calls for",
+                                              origin=EFFECTS_PATH),
+                         rrb.TextLogView(name="Events", origin="events"),
+                         row_shares=[3, 6, 2]),
+            rrb.Vertical(books, levels, rrb.Horizontal(*joints), row_shares=[5, 2, 2]),
             column_shares=[2, 3]),
         rrb.TimePanel(timeline=TIMELINE, play_state="following" if live else "paused",
                       state="collapsed"),
@@ -85,17 +154,79 @@ def blueprint(arm, channels, live: bool) -> rrb.Blueprint:
     )
 
 
-def styles(arm, channels) -> list:
+# --- the effects document ---------------------------------------------------------------
+
+def _value(value) -> str:
+    if isinstance(value, tuple):
+        return ", ".join(f"{v:g}" for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _unit(unit: str) -> str:
+    return "" if unit == "1" else unit.replace("^2", "²")
+
+
+def effect_rows(snap, effect) -> list[tuple[str, str, str]]:
+    """(parameter, value, unit) of one effect, as the scene gave them."""
+    scene, name = snap.scene, effect.name
+    if name in MAPPING_EFFECTS:
+        units = {p.name: p.unit for p in MAPPING_EFFECTS[name].parameters}
+        rows = [(key, _value(v), _unit(units.get(key, "")))
+                for key, v in (getattr(scene, name) or {}).items() if v is not None]
+        if name == "motors":
+            rows.append(("armature N²J", _value(effect.armature), "kg m²"))
+        return rows
+    if name == "gravity":
+        return [("magnitude along −y", _value(effect.gravity), "m/s²")]
+    if name == "damping":
+        return [("d" if not isinstance(scene.damping, tuple) else "d per joint",
+                 _value(scene.damping), "N m s/rad")]
+    if name == "effort_limits":
+        return [("limit per joint", _value(effect.limits), _unit(EffortLimits.parameter.unit))]
+    if name == "actuator":
+        rows = [("policy", scene.policy, "")]
+        if getattr(effect, "fixed", None) is not None:
+            rows.append(("torque", _value(tuple(effect.fixed)), "N m"))
+        return rows
+    return []
+
+
+def effects_document(snap) -> str:
+    """The effects the scene called for, with their parameters in units, and its books."""
+    scene = snap.scene
+    about = f": {scene.description}" if scene.description else ""
+    lines = [f"**{scene.name}**{about} ({scene.integrator}, h = {scene.step_size:g} s)", "",
+             "| effect | parameter | value | unit |", "|---|---|---|---|"]
+    for effect in snap.effects:
+        rows = effect_rows(snap, effect) or [("", "", "")]
+        lines += [f"| {effect.name if i == 0 else ''} | {p} | {v} | {u} |"
+                  for i, (p, v, u) in enumerate(rows)]
+    if not snap.effects:
+        lines.append("| none: the bare arm | | | |")
+    kinds = snap.kinds.items()
+    lines += ["", "**Energy books (J)**: E(t) − E(0) = inputs − losses + residual", "",
+              f"- E: {' + '.join(snap.parts)}"]
+    for kind, title in (("input", "inputs"), ("loss", "losses"),
+                        ("transfer", "transfers (inside the books, not counted)")):
+        names = [name for name, k in kinds if k == kind]
+        if names:
+            lines.append(f"- {title}: {', '.join(names)}")
+    if snap.extra:
+        unit = " (A)" if tuple(snap.extra) == ("i1", "i2") else ""
+        lines.append(f"- extra state: {', '.join(snap.extra)}{unit}")
+    return drawable("\n".join(lines) + "\n")
+
+
+def styles(snap) -> list:
     """(entity path, archetype) of what does not change from step to step, to log static:
-    the series' names and colours, the horizon, and how links, joints and trace are drawn."""
-    static = [(path, rr.SeriesLines(names=[ENERGY_SERIES[path][0]],
-                                    colors=[ENERGY_SERIES[path][1]], widths=[2.0]))
-              for path in energy_paths(channels)]
-    static += [(path, rr.SeriesLines(names=list(JOINT_SERIES[path][1]), colors=list(JOINT_COLORS),
-                                     widths=[2.0, 2.0]))
-               for path in joint_paths(channels)]
-    extent = reach(arm)
+    the series' names and colours, the effects document, the horizon, and how links,
+    joints and trace are drawn."""
+    static = [(path, rr.SeriesLines(names=[drawable(n) for n in names], colors=list(colors),
+                                    widths=list(widths)))
+              for path, (names, colors, widths) in series(snap).items()]
+    extent = reach(snap.arm)
     return static + [
+        (EFFECTS_PATH, rr.TextDocument(effects_document(snap), media_type=rr.MediaType.MARKDOWN)),
         ("arm/horizon", rr.LineStrips2D([[(-extent, 0.0), (extent, 0.0)]], colors=[HORIZON_COLOR],
                                         radii=[0.004], draw_order=0.0)),
         ("arm/links", rr.LineStrips2D.from_fields(colors=list(JOINT_COLORS), radii=[0.035],

@@ -1,30 +1,167 @@
-"""A batch of recorded steps as numpy arrays: the readouts of every channel and the arm's
-drawing, for all rows at once with numpy. Pure functions: no rerun, no state.
+"""A batch of recorded steps as numpy arrays: every readout of the scene's effects and the
+arm's drawing, for all rows at once. No rerun here.
+
+`Snapshot(sim)` is what a batch is read with: the simulator's layout when its rows were
+taken (extra states, channels and their kinds, the effects that store energy, the joint
+torque's code, E(0) split into its parts), so rows queued before a payload is grasped or
+a reset still read as they were taken. `channel_values` names each readout by its entity
+path (the names below; blueprint.py gives them series names, colours and places):
+
+    energy/total, energy/balance_residual   E (kinetic and every stored energy) and residual, J
+    books/stored/<part>      change since t = 0 of kinetic and each effect's stored energy
+    books/<kind>/<channel>   every channel of the scene by name (kind: input, loss, transfer)
+    joints/angle, joints/velocity, joints/torque (with a drive), joints/current (windings)
+
+With books/stored/* + inputs - losses the residual closes: Σ stored changes - Σ inputs +
+Σ losses = energy/balance_residual (transfer channels, e.g. the motors' work on the joints
+with windings, move energy inside the books and are not counted).
 """
 from __future__ import annotations
 
+from types import FunctionType
+
 import numpy as np
 
+from ..physics.effects import Effect
 
-def energies(arm, gravity: float, q1, q2, u1, u2):
-    """Kinetic and potential energy of many states: model.kinetic_energy and
-    model.potential_energy term for term, in numpy (the scalar calls cost more than
-    the RK4 step itself; see benchmarks/bench_telemetry.py)."""
-    a, b, d = arm.inertia_coefficients
-    k1, k2 = arm.gravity_coefficients
+# Each effect's stored energy as a part of E: the part's name in the books.
+STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
+KINDS = ("input", "loss", "transfer")
+CURRENTS = ("i1", "i2")           # the windings' extra states (A)
+
+
+def stores_energy(effect) -> bool:
+    """Whether an effect keeps energy of its own in E: gravity, springs, the windings'
+    inductance. Motors without windings store none apart from T (the rotors are in M)."""
+    return (type(effect).stored_energy is not Effect.stored_energy
+            and getattr(effect, "windings", True))
+
+
+def channel_path(name: str, kind: str) -> str:
+    return f"books/{kind}/{name}"
+
+
+def stored_path(part: str) -> str:
+    return f"books/stored/{part}"
+
+
+def extra_paths(extra) -> dict:
+    """{entity path: names of the extra states it holds}: the winding currents together."""
+    if tuple(extra) == CURRENTS:
+        return {"joints/current": CURRENTS}
+    return {f"state/{name}": (name,) for name in extra}
+
+
+class Snapshot:
+    """How the rows of one simulator read (see the module's docstring). `initial`: E(0)'s
+    parts {kinetic, part: J} to keep (a payload grasped mid-run keeps the run's E(0));
+    default: those of the scene's initial state."""
+
+    def __init__(self, sim, initial: dict | None = None):
+        dynamics = self.dynamics = sim.dynamics
+        self.scene, self.arm, self.step_size = sim.scene, sim.arm, sim.step_size
+        self.extra, self.channels = tuple(sim.extra), tuple(sim.channels)
+        self.kinds = dict(zip(self.channels, dynamics.channel_kinds))
+        self.first = 4 + len(self.extra)
+        self.effects = dynamics.active
+        self.stores = tuple((STORED_PARTS.get(e.name, e.name), e, self._extra_of(e))
+                            for e in dynamics.active if stores_energy(e))
+        self.drives = any(e.drives for e in dynamics.active)
+        self.initial_energy = sim.initial_energy
+        self._torque = vectorised(dynamics.torque_function) if self.drives else None
+        if initial is None:
+            scene = sim.scene
+            row = np.array([[*scene.initial_positions, *scene.initial_velocities]
+                            + [0.0] * (len(self.extra) + len(self.channels))])
+            with np.errstate(all="ignore"):     # an absurd start's E is inf, as in the core
+                kinetic, stored = energies(self, row)
+            initial = {"kinetic": float(kinetic[0])} | {p: float(v[0]) for p, v in stored.items()}
+        self.initial = {part: initial.get(part, 0.0) for part in self.parts}
+
+    def _extra_of(self, effect) -> slice:
+        """The state columns of the effect's extra states (none: an empty slice)."""
+        start = 4 + (self.extra.index(effect.state[0]) if effect.state else 0)
+        return slice(start, start + len(effect.state))
+
+    @property
+    def parts(self) -> tuple[str, ...]:
+        """The parts of E: kinetic, then each effect's stored energy in assembly order."""
+        return ("kinetic",) + tuple(part for part, _, _ in self.stores)
+
+    @property
+    def key(self) -> tuple:
+        """What the blueprint and the series' styles depend on."""
+        return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives)
+
+    def joint_torque(self, states, commands):
+        """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
+        row (`commands`: the command held at each row, for the command policies)."""
+        if commands is not None:
+            self._torque.__globals__["command"] = (commands[:, 0], commands[:, 1])
+        t1, t2 = self._torque(*states[:, :self.first].T)
+        return np.column_stack(np.broadcast_arrays(t1, t2, states[:, 0])[:2])
+
+
+def vectorised(function):
+    """A generated function of physics/dynamics.py run on arrays: the same code with
+    numpy's cos, sin, minimum and maximum, as physics/batch.py runs the right-hand side."""
+    names = dict(function.__globals__, cos=np.cos, sin=np.sin, MIN=np.minimum, MAX=np.maximum)
+    return FunctionType(function.__code__, names, function.__name__)
+
+
+def energies(snap: Snapshot, states):
+    """Kinetic energy (links and rotors) and {part: stored energy} of each effect that
+    stores some, for (n, width) states: Simulator.energies term for term in numpy (the
+    scalar calls cost more than the RK4 step itself; see benchmarks/bench_telemetry.py)."""
+    q1, q2, u1, u2 = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
+    a, b, d, m22 = snap.arm.mass_constants
     c2 = np.cos(q2)
     m11 = a + 2.0 * b * c2
     m12 = d + b * c2
-    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + d * u2 * u2)
-    potential = gravity * (k1 * np.sin(q1) + k2 * np.sin(q1 + q2))
-    return kinetic, potential
+    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + m22 * u2 * u2)
+    return kinetic, {part: _stored(snap, effect, states, at) for part, effect, at in snap.stores}
 
 
-def gravity_torques(arm, gravity: float, q1, q2):
-    """model.gravity_torque for many configurations, as an (n, 2) array."""
-    k1, k2 = arm.gravity_coefficients
-    g2 = gravity * k2 * np.cos(q1 + q2)
-    return np.column_stack((gravity * k1 * np.cos(q1) + g2, g2))
+def _stored(snap: Snapshot, effect, states, at):
+    q1, q2 = states[:, 0], states[:, 1]
+    if effect.name == "gravity":          # model.potential_energy, vectorised
+        k1, k2 = snap.arm.gravity_coefficients
+        return effect.gravity * (k1 * np.sin(q1) + k2 * np.sin(q1 + q2))
+    extra = tuple(states[:, at].T)
+    try:                                  # springs, windings: plain arithmetic
+        value = effect.stored_energy(snap.arm, (q1, q2), extra)
+    except TypeError:                     # math on arrays: one row at a time
+        value = [effect.stored_energy(snap.arm, row[:2], tuple(row[at])) for row in states]
+    return np.broadcast_to(np.asarray(value, dtype=float), q1.shape)
+
+
+def channel_values(snap: Snapshot, states, commands) -> dict:
+    """{entity path: (n,) or (n, k) values} of every readout of (n, width) states (q1, q2,
+    q̇1, q̇2, the extra states, the channels), named as the module's docstring says."""
+    kinetic, stored = energies(snap, states)
+    potential = sum(stored.values()) if stored else np.zeros_like(kinetic)
+    total = kinetic + potential
+    books = {name: states[:, snap.first + i] for i, name in enumerate(snap.channels)}
+    inputs = losses = 0.0
+    for name, kind in snap.kinds.items():
+        if kind == "input":
+            inputs = inputs + books[name]
+        elif kind == "loss":
+            losses = losses + books[name]
+    values = {"energy/total": total,
+              "energy/balance_residual": total - snap.initial_energy - inputs + losses,
+              stored_path("kinetic"): kinetic - snap.initial["kinetic"]}
+    for part, value in stored.items():
+        values[stored_path(part)] = value - snap.initial[part]
+    for name, kind in snap.kinds.items():
+        values[channel_path(name, kind)] = books[name]
+    values["joints/angle"], values["joints/velocity"] = states[:, 0:2], states[:, 2:4]
+    if snap.drives:
+        values["joints/torque"] = snap.joint_torque(states, commands)
+    for path, names in extra_paths(snap.extra).items():
+        at = [4 + snap.extra.index(name) for name in names]
+        values[path] = states[:, at] if len(at) > 1 else states[:, at[0]]
+    return values
 
 
 def drawing_points(arm, q1, q2):
@@ -33,41 +170,6 @@ def drawing_points(arm, q1, q2):
     elbow = np.column_stack((l1 * np.cos(q1), -l1 * np.sin(q1)))
     tip = elbow + np.column_stack((l2 * np.cos(q1 + q2), -l2 * np.sin(q1 + q2)))
     return elbow, tip
-
-
-def applied_torques(sim, q1, q2, commands):
-    """The applied torque per row, as sim.dynamics.applied_torque gives it at that step
-    (`commands`: the held command of each row, for the command policies)."""
-    scene, n = sim.scene, len(q1)
-    if commands is not None:
-        tau = commands.reshape(n, 2)
-    else:
-        tau = np.tile(sim.dynamics.applied_torque((0.0, 0.0)), (n, 1)).astype(float)
-    if scene.policy.endswith("gravity_compensation") and scene.gravity != 0.0:
-        tau = (0.0 if scene.policy == "gravity_compensation" else tau) + gravity_torques(
-            sim.arm, scene.gravity, q1, q2)
-    return tau
-
-
-def channel_values(sim, states, commands) -> dict:
-    """{entity path: (n,) or (n, k) values} of the scalar channels for (n, width) states
-    of `sim` (q1, q2, q̇1, q̇2, then sim.channels), as blueprint.energy_paths and
-    joint_paths name them."""
-    q1, q2, u1, u2 = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
-    kinetic, potential = energies(sim.arm, sim.scene.gravity, q1, q2, u1, u2)
-    total = kinetic + potential
-    books = {name: states[:, 4 + i] for i, name in enumerate(sim.channels)}
-    work = books.get("work", 0.0)
-    dissipated = books.get("dissipated", 0.0)
-    values = {"energy/kinetic": kinetic, "energy/potential": potential, "energy/total": total,
-              "energy/balance_residual": total - sim.initial_energy - work + dissipated,
-              "joints/angle": states[:, 0:2], "joints/velocity": states[:, 2:4]}
-    if "dissipated" in books:
-        values["energy/dissipated"] = dissipated
-    if "work" in books:
-        values["work/actuator"] = work
-        values["joints/torque"] = applied_torques(sim, q1, q2, commands)
-    return values
 
 
 def unpack(runs, states, n):

@@ -26,6 +26,7 @@ import numpy as np
 import rerun as rr
 
 from .blueprint import blueprint, styles
+from .readouts import Snapshot
 from .sinks import open_sinks
 from .writer import BatchWriter
 
@@ -61,6 +62,8 @@ class RerunRecorder:
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
+        self._snapshot = None     # how the steps waiting read: sim's layout when they were taken
+        self._dynamics = None     # sim.dynamics then (a payload grasped rebuilds it)
         # Steps waiting to be sent: their states flattened into one array of doubles (8 bytes
         # a number rather than ~40 as tuples of floats kept alive, and nothing left to convert
         # while holding the GIL in the sender), and runs of consecutive steps under one held
@@ -72,7 +75,7 @@ class RerunRecorder:
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
         self._writer = BatchWriter(self.stream)   # the sender thread's: timeline and trace
-        self._layout = None       # what the blueprint was drawn for: (channels, arm)
+        self._layout = None       # what the blueprint was drawn for: Snapshot.key
         self._batches = queue.Queue(maxsize=QUEUED_BATCHES)
         self._sender = None
 
@@ -95,8 +98,8 @@ class RerunRecorder:
         taken under the command sim holds now (the node hands its steps over before a new
         command). The node calls this every 10 steps, `arm-sim run` every 1000; the states
         are copied, so the caller may reuse the list. Nothing else happens here (see flush)."""
-        if sim is not self.sim:
-            self._bind(sim)
+        if sim is not self.sim or sim.dynamics is not self._dynamics:
+            self._bind(sim, rebuilt=sim is self.sim)
         n = len(states)
         if n == 0:
             return
@@ -122,7 +125,7 @@ class RerunRecorder:
         self._check_at = min(waiting + self._check_every, BATCH_STEPS)
         if not (waiting or self._events) or not due:
             return
-        batch = (self.sim, self._runs, self._states, self._events)
+        batch = (self._snapshot, self._runs, self._states, self._events)
         self._states, self._runs, self._events, self._waiting = array("d"), [], [], 0
         self._check_at = min(self._check_every, BATCH_STEPS)
         self._last_send = time.monotonic()
@@ -164,15 +167,17 @@ class RerunRecorder:
 
     # -- binding a simulator --------------------------------------------------------------
 
-    def _bind(self, sim) -> None:
-        """Rows buffered so far belong to the previous simulator: send them first. The
-        simulator's own events (sub-stepping, refused steps) go to the text log."""
+    def _bind(self, sim, rebuilt: bool = False) -> None:
+        """Rows buffered so far belong to the previous simulator (or to sim's dynamics
+        before a payload change, `rebuilt`, which keeps the run's E(0)): send them first.
+        The simulator's own events (sub-stepping, refused steps) go to the text log."""
         previous = self.sim
         if previous is not None:
             self.flush(force=True)
-        self.sim = sim
+        initial = self._snapshot.initial if rebuilt and self._snapshot is not None else None
+        self.sim, self._dynamics, self._snapshot = sim, sim.dynamics, None
         self._commanded = sim.scene.policy.startswith("command")
-        self._guard(self._describe, sim)
+        self._guard(self._describe, sim, initial)
         if sim is not previous:
             if previous is not None and self._on_sim_event in previous.event_listeners:
                 previous.event_listeners.remove(self._on_sim_event)
@@ -180,21 +185,22 @@ class RerunRecorder:
                 self._on_sim_event(earlier)
             sim.event_listeners.append(self._on_sim_event)
 
-    def _describe(self, sim) -> None:
+    def _describe(self, sim, initial=None) -> None:
         """Open the sinks (first time) and log what does not change from step to step."""
-        layout = (sim.channels, sim.arm)
+        snap = self._snapshot = Snapshot(sim, initial)
+        layout = snap.key
         if self._layout is None:
-            board = blueprint(sim.arm, sim.channels, self.live)
+            board = blueprint(snap, self.live)
             if open_sinks(self.stream, board, self.sinks, self._warn_once, path=self.path,
                           spawn=self.spawn, connect=self.connect):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
         elif layout != self._layout and self.enabled:
-            rr.send_blueprint(blueprint(sim.arm, sim.channels, self.live), recording=self.stream)
+            rr.send_blueprint(blueprint(snap, self.live), recording=self.stream)
         self._layout = layout
         if not self.enabled:
             return
-        for path, archetype in styles(sim.arm, sim.channels):
+        for path, archetype in styles(snap):
             self.stream.log(path, archetype, static=True)
 
     # -- sending ------------------------------------------------------------------------
@@ -206,9 +212,9 @@ class RerunRecorder:
                 with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
                     self._guard(self._send, *batch)
 
-    def _send(self, sim, runs, states, events) -> None:
+    def _send(self, snap, runs, states, events) -> None:
         """One batch, as flush() queued it."""
-        self._writer.send(sim, runs, states, events)
+        self._writer.send(snap, runs, states, events)
 
     # -- failures -----------------------------------------------------------------------
 

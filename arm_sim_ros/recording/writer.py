@@ -17,7 +17,8 @@ FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 f
 
 
 class BatchWriter:
-    """send(sim, runs, states, events) for each batch the recorder's flush() queued, in order."""
+    """send(snap, runs, states, events) for each batch the recorder's flush() queued, in
+    order; `snap` (a readouts.Snapshot) is how its rows read."""
 
     def __init__(self, stream):
         self.stream = stream
@@ -26,22 +27,22 @@ class BatchWriter:
         self._last_ns = 0         # timeline position of the last row sent
         self._last_tip = None
 
-    def send(self, sim, runs, states, events) -> None:
+    def send(self, snap, runs, states, events) -> None:
         """Runs of [first step, command, steps] with their flattened states, and text lines
         (rows waiting before them, text, level), each at its row (the last one if none)."""
         n = sum(steps for _, _, steps in runs)
         if n:
-            self._send_rows(sim, *unpack(runs, states, n))
+            self._send_rows(snap, *unpack(runs, states, n))
         if events:
             at = [self._row_ns[min(i, n - 1)] if n else self._last_ns for i, _, _ in events]
             self._send_columns("events", [time_column(np.array(at))], rr.TextLog.columns(
                 text=[text for _, text, _ in events], level=[level for _, _, level in events]))
 
-    def _send_rows(self, sim, steps, states, commands) -> None:
-        index = [time_column(self._timeline(steps * sim.step_size))]
-        for path, column in channel_values(sim, states, commands).items():
+    def _send_rows(self, snap, steps, states, commands) -> None:
+        index = [time_column(self._timeline(steps * snap.step_size))]
+        for path, column in channel_values(snap, states, commands).items():
             self._send_columns(path, index, scalars(column))
-        self._send_drawing(sim, steps, states[:, 0], states[:, 1])
+        self._send_drawing(snap, steps, states[:, 0], states[:, 1])
 
     def _timeline(self, t):
         """Each row's position on the timeline in ns: t, plus the simulated time of every run
@@ -54,13 +55,13 @@ class BatchWriter:
         self._last_ns = self._row_ns[-1]
         return self._row_ns
 
-    def _send_drawing(self, sim, steps, q1, q2) -> None:
+    def _send_drawing(self, snap, steps, q1, q2) -> None:
         """Links, joints and the tip's trace every FRAME_PERIOD of simulated time."""
-        frames = np.flatnonzero(steps % max(1, round(FRAME_PERIOD / sim.step_size)) == 0)
+        frames = np.flatnonzero(steps % max(1, round(FRAME_PERIOD / snap.step_size)) == 0)
         if frames.size == 0:
             return
         index = [time_column(self._row_ns[frames])]
-        elbow, tip = drawing_points(sim.arm, q1[frames], q2[frames])
+        elbow, tip = drawing_points(snap.arm, q1[frames], q2[frames])
         base = np.zeros_like(elbow)
         self._send_columns("arm/links", index, strips(
             np.stack((base, elbow, elbow, tip), 1), strips_per_row=2))

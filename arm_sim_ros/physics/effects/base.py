@@ -35,7 +35,7 @@ class Parameter:
 
     def coerce(self, effect: str, value):
         """The value as a float or a pair of floats, or ParameterError saying why."""
-        label = f"{effect}.{self.name}"
+        label = effect if effect == self.name else f"{effect}.{self.name}"   # effort_limits
         if self.kind == "pair":
             if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
                 raise ParameterError(f"{label} must be a list of two numbers ({self.unit}), "

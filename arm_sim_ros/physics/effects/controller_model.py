@@ -29,7 +29,10 @@ class ControllerModel(Effect):
         self.gravity = true_gravity if self.gravity is None else self.gravity
         payload = believed.pop("payload_mass", None)
         payload = true_payload if payload is None else payload
-        arm = replace(true_arm, **{k: v for k, v in believed.items() if v is not None})
+        # Only its gravity is ever used: inertias of 1 kg m^2 keep a believed COM on the
+        # elbow axis from making a mass matrix nobody uses singular (refused by ArmParameters).
+        arm = replace(true_arm, com_inertias=(1.0, 1.0),
+                      **{k: v for k, v in believed.items() if v is not None})
         self.arm = arm.with_payload(payload)
 
     def constants(self, arm) -> dict:

@@ -117,6 +117,17 @@ class Motors(Effect):
         return max(k * n * (worst_stiffness(arm) / l) ** 0.5 for k, n, l in
                    zip(self.torque_constant, self.gear_ratio, self.inductance))
 
+    def saturation(self, torque) -> str:
+        """'' while each driver can ask for the requested joint torque `torque` (τₐ) within
+        its voltage limit, else which joint asks for how much beyond it."""
+        over = []
+        for j, (t, limit) in enumerate(zip(torque, self.voltage_limit or ())):
+            volts = self.resistance[j] / (self.gear_ratio[j] * self.torque_constant[j]) * t
+            if abs(volts) > limit:
+                over.append(f"joint {j + 1} asks for {volts:.4g} V beyond its {limit:g} V limit")
+        return "; ".join(over) + (" (its joint gets less torque than requested; saturated "
+                                  "steps are counted)" if over else "")
+
     def joint_torque(self, extra) -> tuple[float, float]:
         """What the joints receive from the windings' currents."""
         return tuple(k * n * i for k, n, i in zip(self.torque_constant, self.gear_ratio, extra))
