@@ -67,3 +67,22 @@ def test_a_negative_payload_is_refused_and_changes_nothing():
     with pytest.raises(ParameterRefused, match="payload_mass"):
         core.set_parameters({"payload_mass": -1.0})
     assert core.sim.scene.payload is None
+
+
+def test_a_driver_saturating_later_in_the_run_is_logged_when_it_happens(tmp_path, caplog):
+    scene = tmp_path / "weak_driver.yaml"
+    scene.write_text("gravity: 0.0\npolicy: command\nstep_size: 0.001\nmotors:\n"
+                     "  gear_ratio: [100.0, 50.0]\n  rotor_inertia: [1.81e-5, 1.81e-5]\n"
+                     "  resistance: [0.573, 0.573]\n  inductance: [0.301e-3, 0.301e-3]\n"
+                     "  torque_constant: [0.0404, 0.0404]\n  voltage_limit: [2.0, 2.0]\n")
+    core = make_core(scene=str(scene), publish_rate=100.0)
+    core.sim.set_command(0.0, 0.0)
+    with caplog.at_level(logging.WARNING):
+        for _ in range(3):
+            core.tick(0.0)
+        assert not [r for r in caplog.records if "saturates" in r.getMessage()]
+        core.on_command([40.0, 0.0])          # 0.573 * 40 / (100 * 0.0404) = 5.7 V > 2 V
+        for _ in range(3):
+            core.tick(0.0)
+    assert core.sim.saturated_steps > 0
+    assert [r for r in caplog.records if "motor driver saturates" in r.getMessage()]

@@ -155,3 +155,25 @@ def test_progress_is_silent_for_short_work_and_a_plain_line_off_a_terminal():
     line = "".join(stream)
     assert line.startswith("arm-sim run release: 60 of 100 s (60.0 %), about 8 s left")
     assert "\r" not in line
+
+
+@pytest.mark.parametrize("argv", [
+    ["--set", "initial_velocities=1000,-1000", "--duration", "2"],   # unstable at h = 0.01 s
+    ["--step", "10", "--duration", "20"],                            # a step far too large
+])
+def test_a_run_that_diverged_while_finite_says_so_and_exits_1(capsys, argv):
+    code = cli.main(["run", *argv, "--json"])
+    out, err = capsys.readouterr()
+    result = strict_json(out)
+    assert code == 1 and "diverged" in result["fault"] and "diverged" in err
+    assert err.count("arm-sim: fault") == 1                   # said once, not every step
+    # what is reported is the last sound state, not the nonsense that followed
+    assert max(abs(v) for v in result["q"] + result["qd"]) < 1e4
+    assert abs(result["residual"]) < 1.0 + abs(result["total"])
+
+
+@pytest.mark.parametrize("scene", sorted(__import__("arm_sim_ros.physics.scene",
+                                                    fromlist=["preset_names"]).preset_names()))
+def test_no_preset_trips_the_divergence_guard(capsys, scene):
+    assert cli.main(["run", "--scene", scene, "--duration", "5", "--json"]) == 0
+    assert strict_json(capsys.readouterr().out)["fault"] is None

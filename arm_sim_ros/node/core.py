@@ -28,7 +28,8 @@ class ArmSimCore:
         self.log = log
         self.wall_clock = wall_clock
         self.start_stamp_ns = time.time_ns() if start_stamp_ns is None else start_stamp_ns
-        self.commands = CommandIntake(log, RateLimitedLog(log, wall_clock))
+        self.warnings = RateLimitedLog(log, wall_clock)
+        self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
         self._elapsed_before_reset_ns = 0
         self._configure(config)
@@ -47,6 +48,7 @@ class ArmSimCore:
         self.sim = Simulator(config.scene)
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
+        self.sim.event_listeners.append(self._on_sim_event)
         self.commands.restart()
         self.held = False                   # integration left the finite numbers; holding
         self.max_abs_residual = 0.0
@@ -55,6 +57,12 @@ class ArmSimCore:
         self._diag_time = self.sim.time
         self._refused_at_last_diag = self.refused_commands
         self._late_at_last_diag = self.late_ticks
+
+    def _on_sim_event(self, event) -> None:
+        """What the simulator does later (a driver saturating...) reaches the log as it
+        happens; a fault is logged where the tick holds (_advance)."""
+        if event.kind != "fault":
+            self.warnings.warning(event.kind, f"{event.message} (at t = {event.t:.6f} s)")
 
     def set_parameters(self, changes: dict) -> list:
         """Apply runtime parameter changes; ParameterRefused leaves everything as it was.

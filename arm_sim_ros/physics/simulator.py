@@ -5,7 +5,8 @@ cannot make it skip or drift.
 
 At the stability limit (stability.py) a step is split into equal sub-steps, and a step
 that would leave the finite numbers is refused: the last finite state is kept and
-`fault` says why. Both are reported in `events`. A motor driver asked for more than its
+`fault` says why; so is every step after a state that diverged while finite (guard.py:
+energy from nothing), until reset. Both are reported in `events`. A motor driver asked for more than its
 voltage limit (checked at the state each step ends in) is counted in `saturated_steps`
 and reported once, the first time, as a `saturation` event.
 """
@@ -15,7 +16,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from math import isfinite
 
-from . import model, stability
+from . import guard, model, stability
 from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, compile_step
 from .scene import Scene
@@ -109,6 +110,8 @@ class Simulator:
         self.saturated_steps = 0     # steps ending where a driver asks beyond its voltage limit
         self.dynamics.command[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
+        self.diverged = None         # why the run diverged (guard.py), held until reset
+        self._sound = self.state     # the latest state the divergence check found sound
 
     @property
     def time(self) -> float:
@@ -140,22 +143,11 @@ class Simulator:
         self.state = tuple(state)
 
     def _plan_substeps(self, tableau) -> None:
-        """How many sub-steps keep the stiff effects stable at every elbow angle (1 = plain
-        steps): damping alone has real eigenvalues (the real-axis limit); springs and
-        windings oscillate, so their bound |lambda| is kept inside the half-disk."""
-        active = self.dynamics.active
-        self.stability_ratio, self.stability_limit, what = stability.bound(
-            tableau, active, self.arm, self.step_size)
-        adaptive = getattr(tableau, "adaptive", False)   # its own error control sub-steps
-        self.substeps = (1 if adaptive else
-                         stability.substeps_needed(self.stability_ratio, self.stability_limit))
-        self._advance = stability.substepping(self._step, self.substeps)
-        if self.substeps > 1:
-            stiff = "+".join(e.name for e in active if e.stiffness(self.arm) or e.frequency(self.arm))
-            self._emit("substepping", (
-                f"{what} = {self.stability_ratio:.4g} ({stiff}) exceeds {tableau.name}'s "
-                f"stability limit {self.stability_limit:.4g}: each {self.step_size:g} s step "
-                f"is taken as {self.substeps} sub-steps"))
+        (self.stability_ratio, self.stability_limit, self.substeps, self._advance,
+         message) = stability.plan(tableau, self.dynamics.active, self.arm, self.step_size,
+                                   self._step)
+        if message:
+            self._emit("substepping", message)
 
     @property
     def substeps_taken(self) -> int:
@@ -168,6 +160,10 @@ class Simulator:
         return self.refused_steps > 0 and self._refused_step == self.steps - 1
 
     def step(self) -> None:
+        if self.diverged:                 # held until reset: what follows would be nonsense
+            self._refuse(self.diverged, "the last sound state")
+            self.steps += 1
+            return
         try:
             y = self._advance(self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
@@ -180,18 +176,29 @@ class Simulator:
                 self._refuse("would make " + ", ".join(
                     f"{n} = {v}" for n, v in zip(self.state_names, y) if not isfinite(v)))
         self.steps += 1
+        if self.steps % guard.CHECK_EVERY == 0 and not self.holding:
+            self._check_divergence()
         over = self._driver is not None and not self.holding and self._driver(self.state)
         if over:       # the driver was asked for more than its voltage limit: say so once
             self.saturated_steps += 1
             if self.saturated_steps == 1:
                 self._emit("saturation", f"motor driver saturates: {over}")
 
-    def _refuse(self, why: str) -> None:
-        self.fault = (f"the step to t = {(self.steps + 1) * self.step_size:.6g} s {why}; "
-                      "holding the last finite state")
-        if not self.holding:            # the first of a run of refusals
+    def _check_divergence(self) -> None:
+        """A diverged state (guard.py) gives way to the last sound one, held until reset."""
+        why = guard.divergence(self, self.state)
+        if why is None:
+            self._sound = self.state
+        else:                             # the step just counted is refused after all
+            self.state, self.diverged = self._sound, why
+            self._refuse(why, "the last sound state", self.steps - 1)
+
+    def _refuse(self, why: str, kept: str = "the last finite state", step=None) -> None:
+        step = self.steps if step is None else step
+        self.fault = f"the step to t = {(step + 1) * self.step_size:.6g} s {why}; holding {kept}"
+        if not self.refused_steps or self._refused_step != step - 1:   # the first of a run
             self._emit("fault", self.fault)
-        self._refused_step = self.steps
+        self._refused_step = step
         self.refused_steps += 1
 
     def _emit(self, kind: str, message: str) -> None:
@@ -261,4 +268,6 @@ class Simulator:
             largest = max(largest, abs(self.residual()))
             if on_step is not None:
                 on_step(self)
+        if steps and not self.holding:
+            self._check_divergence()          # a short run must not end on nonsense either
         return largest

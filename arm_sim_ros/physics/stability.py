@@ -158,3 +158,19 @@ def substepping(step, substeps: int):
         return y
 
     return advance
+
+
+def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, step):
+    """(ratio, limit, sub-steps, the step to take, what to tell a person or None): the
+    sub-steps that keep the stiff effects stable at every elbow angle (1 = plain steps).
+    Damping alone has real eigenvalues (the real-axis limit); springs and windings
+    oscillate, so their bound |lambda| is kept inside the half-disk. An adaptive method
+    controls its own error and sub-steps by itself."""
+    ratio, limit, what = bound(tableau, effects, arm, h)
+    substeps = 1 if getattr(tableau, "adaptive", False) else substeps_needed(ratio, limit)
+    message = None
+    if substeps > 1:
+        stiff = "+".join(e.name for e in effects if e.stiffness(arm) or e.frequency(arm))
+        message = (f"{what} = {ratio:.4g} ({stiff}) exceeds {tableau.name}'s stability limit "
+                   f"{limit:.4g}: each {h:g} s step is taken as {substeps} sub-steps")
+    return ratio, limit, substeps, substepping(step, substeps), message
