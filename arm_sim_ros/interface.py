@@ -6,6 +6,7 @@ that talk to it; it imports nothing.
 NODE_NAME = "arm_sim"
 JOINT_STATES_TOPIC = "joint_states"
 COMMAND_TOPIC = "joint_torque_commands"
+JOINT_COMMANDS_TOPIC = "joint_commands"          # sensor_msgs/JointState efforts (ros2_control)
 DIAGNOSTICS_TOPIC = "/diagnostics"
 JOINT_NAMES = ("shoulder_joint", "elbow_joint")   # as in urdf/two_link_arm.urdf
 

@@ -86,3 +86,27 @@ def test_a_driver_saturating_later_in_the_run_is_logged_when_it_happens(tmp_path
             core.tick(0.0)
     assert core.sim.saturated_steps > 0
     assert [r for r in caplog.records if "motor driver saturates" in r.getMessage()]
+
+
+# ros2_control's topic-based hardware interface sends JointState commands: efforts by name.
+
+def test_a_joint_state_command_drives_the_joints_by_name_in_any_order():
+    core = make_core(scene="shoulder_torque_no_gravity", policy="command")
+    assert core.on_joint_state_command(["elbow_joint", "shoulder_joint"], [], [], [0.5, 2.0]) is None
+    assert core.command == (2.0, 0.5)
+    assert core.on_joint_state_command(["elbow_joint"], [], [], [-1.0]) is None   # one joint
+    assert core.command == (2.0, -1.0)
+
+
+@pytest.mark.parametrize("names, position, velocity, effort, reason", [
+    (["shoulder_joint"], [0.3], [], [], "the node is torque-driven"),
+    (["wrist_joint"], [], [], [1.0], "unknown joint 'wrist_joint'"),
+    (["shoulder_joint", "elbow_joint"], [], [], [1.0], "2 names but 1 efforts"),
+    (["shoulder_joint", "shoulder_joint"], [], [], [1.0, 2.0], "named twice"),
+    (["shoulder_joint"], [], [], [float("nan")], "not finite"),
+])
+def test_a_joint_state_command_that_is_not_a_torque_command_is_refused_and_counted(
+        names, position, velocity, effort, reason):
+    core = make_core(scene="release", policy="command")
+    assert reason in core.on_joint_state_command(names, position, velocity, effort)
+    assert core.refused_commands == 1 and core.command == (0.0, 0.0)

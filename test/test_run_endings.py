@@ -55,7 +55,10 @@ def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_nam
         [*ARM_SIM, "run", "--duration", "1000", "--json",
          *(str(x) for option, path in outputs.items() for x in (option, path))],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)
+    deadline = time.monotonic() + 60              # a loaded machine imports slowly
+    while time.monotonic() < deadline and (not outputs["--csv"].exists()
+                                           or outputs["--csv"].stat().st_size < 10_000):
+        time.sleep(0.1)                             # signal only once the run is under way
     started = time.monotonic()
     process.send_signal(getattr(signal, signal_name))
     out, err = process.communicate(timeout=30)

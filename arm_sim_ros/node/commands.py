@@ -50,6 +50,23 @@ def refusal(data, torque_limit: float) -> str | None:
     return None
 
 
+def joint_state_refusal(names, position, velocity, effort, joint_names) -> str | None:
+    """Why a JointState is not a torque command for these joints, or None."""
+    if not effort:
+        if position or velocity:
+            return ("it carries no effort: the node is torque-driven, it does not follow "
+                    "positions or velocities (use an effort controller)")
+        return "it carries no effort"
+    if len(effort) != len(names):
+        return f"{len(names)} names but {len(effort)} efforts"
+    unknown = [n for n in names if n not in joint_names]
+    if unknown:
+        return f"unknown joint {unknown[0]!r}; the joints are {', '.join(joint_names)}"
+    if len(set(names)) != len(names):
+        return "a joint is named twice"
+    return None
+
+
 class CommandIntake:
     """The held command and the counters the diagnostics report."""
 
@@ -79,6 +96,24 @@ class CommandIntake:
             self.log.info(f"torque command {list(data)} N m, held until the next one")
         self.value, self.received_at = (float(data[0]), float(data[1])), now
         return None, self.value
+
+    def take_joint_state(self, names, position, velocity, effort, joint_names, policy: str,
+                         torque_limit: float, now: float):
+        """A sensor_msgs/JointState command (as ros2_control's topic-based hardware interface
+        sends them): efforts matched to joints by name, in any order; a joint it does not
+        name keeps its held torque. (refusal reason or None, the new command or None)."""
+        reason = joint_state_refusal(list(names), list(position), list(velocity),
+                                     list(effort), list(joint_names))
+        if reason is not None:
+            self.received += 1
+            self.refused += 1
+            self.warnings.warning("refused joint commands", f"refused JointState command: "
+                                  f"{reason} (refused so far: {self.refused})")
+            return reason, None
+        command = list(self.value)
+        for name, tau in zip(names, effort):
+            command[list(joint_names).index(name)] = tau
+        return self.take(command, policy, torque_limit, now)
 
     def timed_out(self, now: float, timeout: float) -> bool:
         """True when the held command has just expired and dropped to zero."""

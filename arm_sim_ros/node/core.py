@@ -87,8 +87,18 @@ class ArmSimCore:
 
     def on_command(self, data) -> str | None:
         """Take [tau1, tau2] from joint_torque_commands; returns the refusal reason, if any."""
-        reason, command = self.commands.take(data, self.config.scene.policy,
-                                             self.config.values["torque_limit"], self.sim.time)
+        return self._apply(*self.commands.take(data, self.config.scene.policy,
+                                               self.config.values["torque_limit"], self.sim.time))
+
+    def on_joint_state_command(self, names, position, velocity, effort) -> str | None:
+        """Take a sensor_msgs/JointState command from joint_commands (efforts by joint name);
+        returns the refusal reason, if any."""
+        v = self.config.values
+        return self._apply(*self.commands.take_joint_state(
+            names, position, velocity, effort, v["joint_names"], self.config.scene.policy,
+            v["torque_limit"], self.sim.time))
+
+    def _apply(self, reason: str | None, command) -> str | None:
         if reason is not None:
             self.recorder.event(f"refused command: {reason}", "warn")
         elif command is not None:

@@ -18,8 +18,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
-                          split_stamp)
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_COMMANDS_TOPIC,
+                          JOINT_STATES_TOPIC, NODE_NAME, split_stamp)
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import PARAMETERS, SPECS, ParameterRefused, resolve_parameters, scene_defaults
@@ -72,12 +72,18 @@ class ArmSimNode(Node):
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.command_subscription = self.create_subscription(
             Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
+        self.joint_command_subscription = self.create_subscription(
+            JointState, JOINT_COMMANDS_TOPIC, self.on_joint_command, 10)
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
         self.tick_timer = self.create_timer(config.wall_period, self.on_tick)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
+
+    def on_joint_command(self, message: JointState) -> None:
+        self.core.on_joint_state_command(list(message.name), list(message.position),
+                                         list(message.velocity), list(message.effort))
 
     def on_tick(self) -> JointStateData:
         data = self.core.tick()
