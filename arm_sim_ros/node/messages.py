@@ -16,12 +16,16 @@ from dataclasses import dataclass, field
 from struct import pack
 from xml.sax.saxutils import escape, quoteattr
 
+from cyclonedds.core import DDSException
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.annotations import final
 from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.util import duration
+
+from .wire_errors import (DiscoveryError, check_topic_name, cyclone_messages, cyclone_reason,
+                          refused_configuration)
 
 
 # --- builtin_interfaces / std_msgs -------------------------------------------------------
@@ -208,8 +212,9 @@ TYPE_HASHES = {
 
 
 def ros_topic(name: str) -> str:
-    """The DDS topic rmw gives a ROS topic: `joint_states` -> `rt/joint_states`."""
-    return "rt/" + name.lstrip("/")
+    """The DDS topic rmw gives a ROS topic: `joint_states` -> `rt/joint_states`; a name rcl
+    would refuse is refused here (DiscoveryError, one line), for every caller."""
+    return "rt/" + check_topic_name(name, "ROS topic name").lstrip("/")
 
 
 # --- QoS -----------------------------------------------------------------------------------
@@ -243,10 +248,6 @@ PARTICIPANT_QOS = Qos(Policy.Userdata(b"enclave=/;"))
 DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
 
 
-class DiscoveryError(ValueError):
-    """An environment variable that rmw would also reject."""
-
-
 def domain_id_from_env(env=None) -> int:
     text = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
     if not text:
@@ -254,9 +255,11 @@ def domain_id_from_env(env=None) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise DiscoveryError(f"ROS_DOMAIN_ID={text!r} is not an integer") from None
+        raise DiscoveryError(f"ROS_DOMAIN_ID={text!r} is not an integer; set a domain id "
+                             "from 0 to 232, or unset it") from None
     if not 0 <= value <= 232:
-        raise DiscoveryError(f"ROS_DOMAIN_ID={value} is outside 0..232")
+        raise DiscoveryError(f"ROS_DOMAIN_ID={value} is outside 0..232; set a domain id "
+                             "from 0 to 232, or unset it")
     return value
 
 
@@ -282,6 +285,10 @@ def discovery_config(env=None) -> str:
     an interface it has not selected: a ROS node started after ours would never find it."""
     env = os.environ if env is None else env
     scope = discovery_range_from_env(env)
+    text = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip()
+    if text and text not in DISCOVERY_RANGES:   # rmw warns and uses LOCALHOST: say it instead
+        raise DiscoveryError(f"ROS_AUTOMATIC_DISCOVERY_RANGE={text!r} is not one of "
+                             f"{', '.join(DISCOVERY_RANGES)}; set one of them or unset it")
     peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
     user_uri = env.get("CYCLONEDDS_URI", "")
     add_localhost = scope == "LOCALHOST"
@@ -358,10 +365,22 @@ def make_participant(domain_id: int | None = None, config: str | None = None,
     """
     if domain_id is None:
         domain_id = domain_id_from_env(env)
-    if domain_id not in _configured_domains:
-        text = discovery_config(env) if config is None else config
-        _configured_domains[domain_id] = Domain(domain_id, text or None)
-    return DomainParticipant(domain_id, qos=PARTICIPANT_QOS)
+    text = discovery_config(env) if config is None else config   # refuses a bad environment
+    with cyclone_messages() as printed:
+        try:
+            if domain_id not in _configured_domains:
+                _configured_domains[domain_id] = Domain(domain_id, text or None)
+            participant = DomainParticipant(domain_id, qos=PARTICIPANT_QOS)
+        except DDSException:
+            failed = True
+        else:
+            failed = False
+    if failed:   # Cyclone's reason in one line, instead of its stderr lines and a traceback
+        uri = (os.environ if env is None else env).get("CYCLONEDDS_URI", "")
+        raise refused_configuration(uri, config is not None, cyclone_reason(printed[0]))
+    if printed[0]:
+        sys.stderr.write(printed[0])   # warnings of a configuration that works: shown as given
+    return participant
 
 
 def matched(endpoint) -> int:

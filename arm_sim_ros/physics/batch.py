@@ -68,6 +68,11 @@ class Batch:
                              f"{', '.join(SCALAR_PARAMETERS + PAIR_PARAMETERS)}")
         if scene.integrator != "rk4":
             raise SceneError(f"batch rollouts use rk4; scene asks for {scene.integrator!r}")
+        switching = [name for name in ("friction", "joint_limits") if getattr(scene, name)]
+        if switching:
+            raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
+                             "are located arm by arm (physics/events.py); run such a scene "
+                             "one arm at a time (arm-sim run)")
         if count is None:
             count = len(positions) if positions is not None else (
                 len(velocities) if velocities is not None else 1)

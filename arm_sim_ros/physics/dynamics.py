@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from math import cos, sin
 
 from . import model
-from .effects import Effect, scene_effects
+from .effects import Channel, Effect, scene_effects
 
 RIGID_BODY = [
     "    c = cos(q2)",
@@ -28,6 +28,15 @@ SOLVE = [
     "    a2 = (f2 - l21 * f1) / (M22 - l21 * m12)",
     "    a1 = f1 / m11 - l21 * a2",
 ]
+# A fixed joint (stuck, resting on a hard limit) is a constraint: its acceleration is exactly
+# 0, the other joint moves with the reduced dynamics, and lamᵢ is the torque that holds it.
+CONSTRAINED_SOLVE = {
+    (False, False): SOLVE + ["    lam1 = 0.0; lam2 = 0.0"],
+    (True, False): ["    a1 = 0.0", "    a2 = f2 / M22", "    lam1 = m12 * a2 - f1", "    lam2 = 0.0"],
+    (False, True): ["    a2 = 0.0", "    a1 = f1 / m11", "    lam2 = m12 * a1 - f2", "    lam1 = 0.0"],
+    (True, True): ["    a1 = 0.0; a2 = 0.0", "    lam1 = -f1; lam2 = -f2"],
+}
+FIXED = ("stuck", "lower", "upper")
 
 
 @dataclass
@@ -83,10 +92,8 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     extra = [name for effect in effects for name in effect.state]
     signature = ", ".join(["q1", "q2", "u1", "u2"] + extra)
     terms = ["    " + line for effect in effects for line in effect.terms()]
-    lines = [f"def rhs({signature}):"] + RIGID_BODY + terms
-    for effect in sorted(effects, key=lambda e: not e.drives):
-        lines += ["    " + line for line in effect.forces()]
-    channels = [c for effect in effects for c in effect.channels()]
+    lines = [f"def rhs({signature}):"] + body(effects)
+    channels = merged_channels(effects)
     rates = [r for effect in effects for r in effect.rates()]
     lines += SOLVE + ["    return " + ", ".join(["a1", "a2"] + rates + [c.rate for c in channels])]
     drives = any(effect.drives for effect in effects)
@@ -99,6 +106,50 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
                     namespace["torque"], command if command is not None else [0.0, 0.0])
+
+
+def body(effects, mode=None) -> list[str]:
+    """The rigid body, the effects' stage terms, then their forces, inputs first; switching
+    effects in `mode` (None: their mode-free form)."""
+    lines = RIGID_BODY + ["    " + line for effect in effects for line in effect.terms()]
+    for effect in sorted(effects, key=lambda e: not e.drives):
+        forces = effect.mode_forces(mode) if mode is not None else effect.forces()
+        lines += ["    " + line for line in forces]
+    return lines
+
+
+def merged_channels(effects) -> list[Channel]:
+    """The effects' channels; two of one name (damping's and a compliant limit's
+    `dissipated`) become one whose rate is the sum."""
+    merged = {}
+    for channel in (c for effect in effects for c in effect.channels()):
+        if channel.name in merged:
+            channel = Channel(channel.name, f"{merged[channel.name].rate} + {channel.rate}",
+                              channel.kind)
+        merged[channel.name] = channel
+    return list(merged.values())
+
+
+def mode_functions(dynamics: Dynamics, mode, guards):
+    """(rhs, probe, guard) of `mode`: rhs as Dynamics.function, with the fixed joints'
+    accelerations exactly 0; probe(q1, q2, u1, u2, *extra) -> (lam1, lam2, *guards), the
+    holding torques and the switching functions (expressions) there; guard -> the latter."""
+    fixed = tuple(code in FIXED for code in mode[:2])
+    signature = ", ".join(["q1", "q2", "u1", "u2"] + list(dynamics.extra))
+    lines = body(dynamics.active, mode) + CONSTRAINED_SOLVE[fixed]
+    rates = [r for effect in dynamics.active for r in effect.rates()]
+    channels = [c.rate for c in merged_channels(dynamics.active)]
+    source = "\n".join([f"def rhs({signature}):"] + lines
+                       + ["    return " + ", ".join(["a1", "a2"] + rates + channels)]
+                       + [f"def probe({signature}):"] + lines
+                       + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
+    if not any("lam" in g for g in guards):      # the switching functions alone: cheap
+        source += f"def guard({signature}):\n    return ({', '.join(guards)},)\n"
+    else:
+        source += f"def guard({signature}):\n    return probe({signature})[2:]\n"
+    namespace = dict(dynamics.function.__globals__)
+    exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
+    return namespace["rhs"], namespace["probe"], namespace["guard"]
 
 
 def build_dynamics(scene, command=None) -> Dynamics:

@@ -12,7 +12,7 @@ from math import isfinite
 from pathlib import Path
 
 from .. import yaml_files
-from .effects import MAPPING_EFFECTS, POLICIES, EffortLimits, Motors, validate
+from .effects import BUILDERS, MAPPING_EFFECTS, POLICIES, EffortLimits, JointLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
@@ -46,6 +46,8 @@ class Scene:
     motors: dict | None = None
     effort_limits: tuple | None = None
     controller_model: dict | None = None
+    friction: dict | None = None
+    joint_limits: dict | None = None
     integrator: str = "rk4"
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
@@ -82,6 +84,10 @@ class Scene:
             self.arm
         except ParameterError as error:
             raise SceneError(str(error)) from None
+        limits = JointLimits.make(**self.joint_limits) if self.joint_limits else None
+        if limits is not None and limits.hard and limits.inside(self.initial_positions):
+            raise SceneError(f"initial_positions: {limits.inside(self.initial_positions)} "
+                             "(hard joint_limits cannot start beyond)")
 
     @property
     def links(self) -> ArmParameters:
@@ -167,8 +173,8 @@ def coerce_value(name: str, kind: str, value):
             return None
         try:
             values = validate(name, MAPPING_EFFECTS[name].parameters, value)
-            if name == "motors":
-                Motors(**values)          # its cross-checks: windings all three or none
+            if name in BUILDERS:
+                BUILDERS[name](**values)  # its cross-checks: windings all three or none ...
         except ParameterError as error:
             raise SceneError(str(error)) from None
         return values

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from math import isfinite
 
 from . import guard, model, stability
+from .events import switching as switching_for
 from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, compile_step
 from .scene import Scene
@@ -98,6 +99,9 @@ class Simulator:
         self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
         self._plan_substeps(self._tableau)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
+        self.switching, self._advance = switching_for(   # friction, limits: events.py
+            self.dynamics, self._tableau, self._step, self._advance, self.substeps, self._emit,
+            lambda: self.time, getattr(self, "switch_events", None))
 
     def reset(self) -> None:
         s = self.scene
@@ -112,6 +116,7 @@ class Simulator:
         self.initial_energy = self.energy(self.state)
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self._sound = self.state     # the latest state the divergence check found sound
+        self.switch_events = self.switching.reset() if self.switching else {}  # by kind
 
     @property
     def time(self) -> float:
@@ -151,7 +156,7 @@ class Simulator:
 
     @property
     def substeps_taken(self) -> int:
-        """Sub-steps run since reset in steps that had to be split (0 while plain RK4 is stable)."""
+        """Sub-steps run since reset in split steps (0 while plain RK4 is stable)."""
         return self.steps * self.substeps if self.substeps > 1 else 0
 
     @property
@@ -208,8 +213,7 @@ class Simulator:
             listener(event)
 
     def energies(self, state) -> tuple[float, float]:
-        """(kinetic, stored: gravity, springs, windings); NaN where they cannot be evaluated
-        (angles near 1e308 make sin fail), so a held absurd state is reported, not a crash."""
+        """(kinetic, stored); NaN where sin fails (angles near 1e308), not a crash."""
         q, qd, extra = state[0:2], state[2:4], state[4:4 + len(self.extra)]
         try:
             stored = 0.0
@@ -231,9 +235,7 @@ class Simulator:
         return dict(zip(self.channels, state[first:first + len(self.channels)]))
 
     def books(self, state) -> tuple[float, float]:
-        """(energy put in, energy lost) carried in a state's channels: Σ input channels
-        (actuator work, or electrical input with windings; payload exchange) and Σ loss
-        channels (dissipated, copper loss ...); 0 where no effect has such a channel."""
+        """(Σ input channels, Σ loss channels) carried in a state; 0 where there are none."""
         return (sum((state[i] for i in self._inputs), 0.0),
                 sum((state[i] for i in self._losses), 0.0))
 
@@ -259,8 +261,7 @@ class Simulator:
                       channels=channels, inputs=inputs, losses=losses)
 
     def run(self, duration: float, on_step=None) -> float:
-        """Advance by `duration` (a whole number of steps); return the largest |residual|
-        seen at any step, which for an unpowered undamped arm is the energy drift."""
+        """Advance by `duration` (whole steps); return the largest |residual| at any step."""
         steps = self.scene.steps_for(duration, self.step_size)
         largest = 0.0
         for _ in range(steps):

@@ -8,14 +8,22 @@ that bag time is when the publisher sent each message (its DDS source timestamp)
 than when it arrived: on one machine the two differ by the ~0.3 ms transport latency, and
 the send time keeps the publishing cadence that `ros2 bag play` reproduces. Messages keep
 their own header stamps; each topic carries the QoS its publishers offered, as discovery
-reports it. The recording stops at Ctrl-C, SIGTERM or --duration, and always drains the
-readers and closes the bag, so every message received is kept.
+reports it. The recording stops at Ctrl-C, SIGTERM, SIGHUP or --duration within about two
+seconds even under a flood (a second signal stops at once), drains the readers and closes
+the bag, so every message received is kept. Each reader is reliable and keeps the last
+READER_DEPTH samples not yet written (as `ros2 bag record` keeps a keep-last queue): memory
+stays bounded, and a publisher that outpaces the disk for longer loses its oldest
+unwritten samples rather than delaying a stop. Every REPORT_SECONDS a line on stderr gives
+the count per topic, or says that no publisher has been seen yet.
+
+The bag opens at every moment (recording.bag): a kill -9 loses at most the last
+CHUNK_SECONDS of messages; a full disk or file-size limit closes it with what fit.
 """
 from __future__ import annotations
 
-import signal
 import time
 from ..usage import UsageError
+from .signals import StopOnSignals
 
 DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
                   "/joint_torque_commands": "std_msgs/msg/Float64MultiArray",
@@ -23,19 +31,24 @@ DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
 EXTRA_TYPES = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray")
 POLL_SECONDS = 0.1  # how soon a stop request is noticed
 TAKE_BATCH = 256
+READER_DEPTH = 1000  # samples a reader keeps before it drops its oldest (keep-last)
 QUIET_SECONDS = 0.1  # after a stop: no data for this long means everything sent has arrived
-FLUSH_SECONDS = 2.0  # ... and this bounds the wait when publishers keep going
+FLUSH_SECONDS = 1.5  # ... and this bounds the wait when publishers keep going
+REPORT_SECONDS = 3.0
 
 
 def parse_topic(text: str) -> tuple[str, str]:
     """`name:type`, type as `sensor_msgs/msg/JointState` or just `JointState`."""
+
+    from ..node.messages import check_topic_name
 
     name, sep, short = text.rpartition(":")
     matches = [t for t in EXTRA_TYPES if short in (t, t.rsplit("/", 1)[-1])]
     if not sep or not name.strip("/") or not matches:
         raise UsageError(f"--topics {text!r} must be NAME:TYPE with TYPE one of "
                          f"{', '.join(EXTRA_TYPES)} (or its last part, e.g. JointState)")
-    return "/" + name.strip("/"), matches[0]
+    name = "/" + name.removeprefix("/")
+    return check_topic_name(name, f"--topics {text!r}: the name"), matches[0]
 
 
 class TopicRecorder:
@@ -45,10 +58,9 @@ class TopicRecorder:
     been discovered, so the offered QoS written is theirs.
     """
 
-    def __init__(self, participant, topics: dict[str, str], writer):
+    def __init__(self, participant, topics: dict[str, str], writer=None):
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
         from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
-        from cyclonedds.qos import Policy, Qos
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
@@ -64,25 +76,39 @@ class TopicRecorder:
         any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
         for name, msgtype in topics.items():
             cls = wire_types[msgtype]
-            # Keep-all and reliable: a slow disk holds the writers back instead of dropping.
-            qos = wire.default_qos(cls) + Qos(Policy.History.KeepAll)
+            # Reliable, keep-last READER_DEPTH: bounded memory, and no backlog to wait for at a
+            # stop (keep-all held 1.2M samples under a flood; reader-side limits that hold the
+            # publisher back make deleting the reader wait ~10 s).
+            qos = wire.default_qos(cls, depth=READER_DEPTH)
             reader = DataReader(participant, Topic(participant, wire.ros_topic(name), cls), qos=qos)
             self._waitset.attach(ReadCondition(reader, any_sample))
             self._readers[name] = reader
+        self._matched = wire.matched
 
-    def poll(self, timeout: float = POLL_SECONDS) -> int:
-        """Wait up to `timeout` s for data, then write everything available; returns the
-        send time (ns) of the newest sample written, 0 if none."""
+    def poll(self, timeout: float = POLL_SECONDS, stop=None, until: float | None = None,
+             after: int | None = None) -> int:
+        """Wait up to `timeout` s for data, then write what is available (see drain);
+        returns the send time (ns) of the newest sample written, 0 if none."""
         self._waitset.wait(int(timeout * 1e9))
-        return self.drain()
+        return self.drain(stop, time.monotonic() + POLL_SECONDS if until is None else until,
+                          after)
 
-    def drain(self) -> int:
-        """Write every sample the readers hold; returns the newest send time, as poll()."""
+    def drain(self, stop=None, until: float | None = None, after: int | None = None) -> int:
+        """Write the samples the readers hold, TAKE_BATCH at a time from each in turn, until
+        they are empty, `stop.requested` or the monotonic time `until`; a reader that gave a
+        sample sent after `after` (ns) has given all sent before. Returns the newest send
+        time written (0 if none)."""
         from cyclonedds.internal import InvalidSample
 
-        newest = 0
-        for name, reader in self._readers.items():
-            while taken := reader.take(N=TAKE_BATCH):
+        newest, more, passed = 0, True, set()
+        while more and not (stop is not None and stop.requested) and \
+                (until is None or time.monotonic() < until):
+            more = False
+            for name, reader in self._readers.items():
+                if name in passed:
+                    continue
+                taken = reader.take(N=TAKE_BATCH)
+                more |= len(taken) == TAKE_BATCH
                 samples = [s for s in taken if not isinstance(s, InvalidSample)]
                 if samples and name not in self.writer:
                     self._add(name)
@@ -90,24 +116,46 @@ class TopicRecorder:
                     sent = sample.sample_info.source_timestamp
                     self.writer.write(name, sent, self._message(name, sample))
                     newest = max(newest, sent)
+                    if after is not None and sent > after:
+                        passed.add(name)
         return newest
 
-    def run(self, stop, duration: float | None = None) -> None:
-        """Record until `stop.requested` or `duration` wall seconds, then flush."""
-        end = None if duration is None else time.monotonic() + duration
+    def run(self, stop, duration: float | None = None, report=None) -> None:
+        """Record until `stop.requested` or `duration` wall seconds, then flush; `report`
+        (a function taking a line) hears the counts every REPORT_SECONDS."""
+        started = time.monotonic()
+        end = None if duration is None else started + duration
+        next_report = started + REPORT_SECONDS
         while not stop.requested and (end is None or time.monotonic() < end):
             self.poll(POLL_SECONDS if end is None
-                      else min(POLL_SECONDS, max(0.0, end - time.monotonic())))
+                      else min(POLL_SECONDS, max(0.0, end - time.monotonic())), stop)
+            self.writer.checkpoint()
+            if report is not None and time.monotonic() >= next_report:
+                report(self.progress(time.monotonic() - started))
+                next_report += REPORT_SECONDS
         self.flush(time.time_ns())
+
+    def progress(self, seconds: float) -> str:
+        """`record: 6 s: /joint_states 600, /diagnostics no publisher yet`."""
+        parts, seen = [], False
+        for name, reader in self._readers.items():
+            count = self.writer.counts.get(name, 0)
+            publishers = self._matched(reader)
+            seen |= bool(publishers or count)
+            parts.append(f"{name} {count}" if publishers or count else f"{name} no publisher yet")
+        hint = "" if seen else ("; is the node running, with the same ROS_DOMAIN_ID and "
+                                "ROS_AUTOMATIC_DISCOVERY_RANGE?")
+        return f"record: {seconds:.0f} s: {', '.join(parts)}{hint}"
 
     def flush(self, stopped_ns: int) -> None:
         """Write what was sent before the stop. DDS acknowledges a sample before its reader
         can take it (it may sit in a delivery queue), so keep taking until a quiet interval,
         a sample sent after the stop (in-order delivery: the rest has arrived), or
-        FLUSH_SECONDS."""
+        FLUSH_SECONDS; the readers hold at most READER_DEPTH samples each, so a flood ends
+        as quickly."""
         deadline = time.monotonic() + FLUSH_SECONDS
         while time.monotonic() < deadline:
-            newest = self.poll(QUIET_SECONDS)
+            newest = self.poll(QUIET_SECONDS, until=deadline, after=stopped_ns)
             if newest == 0 or newest > stopped_ns:
                 return
 
@@ -149,26 +197,21 @@ def offer_from_dds(qos):
         lease=duration(liveliness, "lease_duration"))
 
 
-class StopRequest:
-    """Set by SIGINT / SIGTERM: the loop finishes its write and closes the bag."""
-
-    def __init__(self):
-        self.requested = False
-
-    def __call__(self, signum, frame):
-        self.requested = True
-
-    def install(self):
-        return {sig: signal.signal(sig, self) for sig in (signal.SIGINT, signal.SIGTERM)}
+# Set by SIGINT, SIGTERM or SIGHUP (used as a context manager): the loop stops, drains and
+# closes the bag; a second signal raises KeyboardInterrupt, and the bag is still closed.
+StopRequest = StopOnSignals
 
 
 def record(path, topics: dict[str, str], participant, duration: float | None = None,
-           stop=None) -> dict[str, int]:
-    """Record until `stop.requested` or `duration` wall seconds; returns messages per topic."""
+           stop=None, report=None) -> dict[str, int]:
+    """Record until `stop.requested` or `duration` wall seconds; returns messages per topic.
+    The readers come first: a topic DDS refuses leaves no bag behind."""
     from ..recording.bag import BagWriter
 
-    with BagWriter(path) as writer:
-        TopicRecorder(participant, topics, writer).run(stop or StopRequest(), duration)
+    recorder = TopicRecorder(participant, topics)
+    with BagWriter(path, start_ns=time.time_ns()) as writer:
+        recorder.writer = writer
+        recorder.run(stop or StopRequest(), duration, report)
         return dict(writer.counts)
 
 
@@ -176,28 +219,25 @@ def cmd_record(args) -> int:
     import sys
     from pathlib import Path
 
+    from math import isfinite
+
     from ..recording.bag import BagError
-    from ..node.messages import DiscoveryError, make_participant
+    from ..node.messages import make_participant
 
     topics = dict(DEFAULT_TOPICS)
     topics.update(parse_topic(t) for text in args.topics or [] for t in text.split(",") if t)
-    if args.duration is not None and not args.duration > 0:
+    if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
         raise BagError(f"--duration {args.duration} must be a positive number of seconds")
     if Path(args.dir).exists():  # refused before joining the network
         raise BagError(f"{args.dir} exists already; a recording never overwrites one")
-    try:
-        participant = make_participant()
-    except DiscoveryError as error:
-        raise BagError(str(error)) from None
-    stop = StopRequest()
-    previous = stop.install()
-    try:
-        print(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)", file=sys.stderr,
-              flush=True)
-        counts = record(args.dir, topics, participant, args.duration, stop)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    participant = make_participant()   # a bad environment: DiscoveryError, one line
+
+    def report(line):
+        print(line, file=sys.stderr, flush=True)
+
+    with StopRequest() as stop:
+        report(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)")
+        counts = record(args.dir, topics, participant, args.duration, stop, report)
     summary = ", ".join(f"{topic} {n}" for topic, n in counts.items()) or "no messages"
     print(f"wrote {args.dir}: {summary}", flush=True)
     return 0

@@ -2,7 +2,10 @@
 
 JointState every publish period (stamped with simulated time, the bag's clock too), the
 applied command when the policy takes commands, and the node's diagnostics every simulated
-second; written through recording.bag's BagWriter.
+second; written through recording.bag's BagWriter, so the bag opens even after a kill -9
+(losing at most its last CHUNK_SECONDS of wall time) and a full disk closes it with what fit.
+The last diagnostics say how the run ended: finished, stopped early (and by what, when the
+caller sets `stop_reason`), or holding after a fault.
 """
 from __future__ import annotations
 
@@ -10,7 +13,7 @@ from math import ceil, isfinite
 from pathlib import Path
 from time import perf_counter
 
-from ..interface import ERROR, NODE_TOPICS, OK
+from ..interface import ERROR, NODE_TOPICS, OK, WARN
 from ..node.core import diagnostic_values
 from ..node.parameters import ParameterRefused, steps_per_tick
 from ..recording.bag import (BagError, BagWriter, diagnostic_array, joint_state,
@@ -48,9 +51,12 @@ class RunBag:
     def __init__(self, path, publish_steps: int):
         self.path = path
         self.publish_steps = publish_steps
+        self.writer = None
+        self.stop_reason = None   # what stopped the run early (a signal's name), if the caller knows
 
     def start(self, sim) -> None:
         self.writer = BagWriter(self.path)
+        self.end_steps = sim.steps + sim.scene.steps_for(sim.scene.duration, sim.step_size)
         self.commands = sim.scene.policy in APPLIED_COMMAND_POLICIES
         for topic, msgtype in NODE_TOPICS.items():
             if self.commands or topic != "/joint_torque_commands":
@@ -64,13 +70,15 @@ class RunBag:
     def step(self, sim) -> None:
         if sim.steps % self.publish_steps == 0:
             self.publish(sim)
-        if sim.steps - self.last_diagnostics >= self.diagnostics_steps:
+        if (sim.steps - self.last_diagnostics >= self.diagnostics_steps
+                and sim.steps < self.end_steps):      # the last one, at the end, says how it ended
             self.diagnose(sim)
 
     def finish(self, sim) -> None:
+        if self.writer is None or self.writer.failed:   # never started, or closed by a failure
+            return
         try:
-            if sim.steps != self.last_diagnostics:
-                self.diagnose(sim)
+            self.diagnose(sim, ending=True)
         finally:
             self.writer.close()
 
@@ -82,16 +90,25 @@ class RunBag:
         if self.commands:
             self.writer.write("/joint_torque_commands", t, torque_command(applied_command(sim)))
 
-    def diagnose(self, sim) -> None:
+    def diagnose(self, sim, ending: bool = False) -> None:
         """The node's diagnostics, same keys; an offline run refuses and misses nothing."""
         t, wall = nanoseconds(sim), perf_counter() - self.wall_start
         command = applied_command(sim) if self.commands else (0.0, 0.0)
         # A refused (non-finite) step leaves the last finite state in place, as in the node.
-        level, message = (ERROR, sim.fault) if sim.holding else (OK, "running")
+        level, message = ((ERROR, sim.fault) if sim.holding else self.ending(sim) if ending
+                          else (OK, "running"))
         values = diagnostic_values(sim, f"{sim.time / wall:.3f}" if wall > 0 else "inf",
                                    self.max_abs_residual, sim.holding, command, self.publish_steps)
         self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=values))
         self.last_diagnostics = sim.steps
+
+    def ending(self, sim) -> tuple[int, str]:
+        """How the run ended, for its last diagnostics."""
+        planned = sim.scene.duration
+        if sim.steps >= self.end_steps:
+            return OK, f"finished: ran its {planned:g} s"
+        by = f" by {self.stop_reason}" if self.stop_reason else ""
+        return WARN, f"stopped{by} at t = {sim.time:.6f} s, before the end of its {planned:g} s"
 
 
 def applied_command(sim):

@@ -13,9 +13,11 @@ from ..usage import UsageError
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "send-torque", help="publish [tau1, tau2] N m to joint_torque_commands (dds transport)")
-    parser.add_argument("torques", nargs=2, type=float, metavar="TAU",
-                        help="shoulder and elbow torque, N m")
+        "send-torque", help="publish [tau1, tau2] N m to joint_torque_commands (dds transport)",
+        usage="arm-sim send-torque [options] TAU1 TAU2")
+    # Counted here, not by argparse, whose complaint for one torque names no second one.
+    parser.add_argument("torques", nargs="*", type=float, metavar="TAU1 TAU2",
+                        help="shoulder and elbow torque, N m (two numbers)")
     parser.add_argument("--rate", type=float, default=10.0, help="repeats per second (default 10)")
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     parser.add_argument("--once", action="store_true", help="send one command and exit")
@@ -26,11 +28,19 @@ def add_parser(subparsers) -> None:
 
 
 def cmd_send_torque(args) -> int:
+    if len(args.torques) != 2:
+        given = f"got {len(args.torques)}" + (f" ({' '.join(f'{t:g}' for t in args.torques)})"
+                                              if args.torques else "")
+        raise UsageError(f"send-torque needs two torques, TAU1 TAU2 (shoulder and elbow, N m), "
+                         f"e.g. `arm-sim send-torque 0.5 0.0`; {given}")
     for name, value in (("--rate", args.rate), ("--wait", args.wait)):
         if not (isfinite(value) and value > 0):
             raise UsageError(f"{name} {value} must be a positive number")
     if args.duration is not None and not (isfinite(args.duration) and args.duration >= 0):
         raise UsageError(f"--duration {args.duration} must be a finite number >= 0")
+    from ..node.messages import check_topic_name
+
+    check_topic_name(args.topic, "--topic")   # before joining the network
     # Non-finite torques are sent as given: the node refuses them, which is worth seeing.
     publisher = TorquePublisher(args.topic)
     if not publisher.wait_for_subscriber(args.wait):

@@ -23,6 +23,7 @@ from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, 
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
+from .dds_services import DdsServices   # issue 15.3: parameter services, ~/reset
 
 CATCH_UP = 0.05   # wall seconds of lag made up by ticking back to back (scheduler jitter)
 
@@ -70,8 +71,12 @@ class DdsArmSimNode:
         self._command_ready = WaitSet(self.participant)
         self._command_ready.attach(ReadCondition(
             self.command_reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+        # --- issue 15.3: rcl_interfaces parameter services, ~/reset, /parameter_events ---
+        self.services = DdsServices(self.participant, name, namespace, self.log)
+        # --- end issue 15.3 ---
         self._announce()
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
+        self.services.attach(self.core)   # issue 15.3
 
     def _writer(self, topic_name: str, message_type) -> DataWriter:
         return DataWriter(self.participant, Topic(self.participant, topic_name, message_type),
@@ -86,8 +91,10 @@ class DdsArmSimNode:
             qos=msg.discovery_info_qos())
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
-            reader_gid_seq=[msg.gid(self.command_reader)],
-            writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer)])
+            reader_gid_seq=[msg.gid(self.command_reader)]
+            + [msg.gid(r) for r in self.services.readers],   # issue 15.3: service requests
+            writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer)]
+            + [msg.gid(w) for w in self.services.writers])   # issue 15.3: replies, events
         self.discovery_writer.write(msg.ParticipantEntitiesInfo(
             gid=msg.gid(self.participant), node_entities_info_seq=[node]))
 
@@ -108,6 +115,7 @@ class DdsArmSimNode:
     def tick(self, wall_now: float | None = None) -> JointStateData:
         """The timer callback: take commands, step, publish joint_states."""
         self.take_commands()
+        self.services.poll()   # issue 15.3: answer service requests between ticks
         data = self.core.tick(wall_now)
         self.joint_state_writer.write(to_joint_state(data))
         return data
@@ -134,10 +142,11 @@ class DdsArmSimNode:
         while ticks is None or done < ticks:
             now = self.wall_clock()
             if period > 0 and now < next_tick:
-                time.sleep(next_tick - now)
+                self.services.serve_for(next_tick - now)   # issue 15.3: sleep, serving
                 now = self.wall_clock()
             self.tick(now)
             done += 1
+            period = self.core.config.wall_period   # issue 15.3: a parameter set may change it
             next_tick += period
             if next_tick < now - max(period, CATCH_UP):  # far behind: restart the schedule
                 next_tick = now
@@ -156,5 +165,6 @@ class DdsArmSimNode:
         """Finish telemetry and leave the DDS graph (cyclonedds deletes an entity when its
         last Python reference goes)."""
         self.core.finish()
+        self.services.close()   # issue 15.3
         self._command_ready = self.command_reader = self.discovery_writer = None
         self.joint_state_writer = self.diagnostics_writer = self.participant = None

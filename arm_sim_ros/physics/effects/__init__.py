@@ -11,18 +11,25 @@ from .base import Channel, Effect, Parameter, validate
 from .controller_model import ControllerModel
 from .damping import Damping
 from .effort_limits import EffortLimits
+from .friction import Friction
 from .gravity import Gravity
+from .joint_limits import CompliantLimits, HardLimits, JointLimits
 from .motors import Motors
 from .payload import Payload
 from .springs import Springs
 
-__all__ = ["POLICIES", "Actuator", "Channel", "ControllerModel", "Damping", "Effect",
-           "EffortLimits", "Gravity", "Motors", "Parameter", "Payload", "Springs",
-           "MAPPING_EFFECTS", "scene_effects", "validate"]
+__all__ = ["POLICIES", "Actuator", "Channel", "CompliantLimits", "ControllerModel", "Damping",
+           "Effect", "EffortLimits", "Friction", "Gravity", "HardLimits", "JointLimits", "Motors",
+           "Parameter", "Payload", "Springs", "BUILDERS", "MAPPING_EFFECTS", "scene_effects",
+           "validate"]
 
 # Scene keys whose value is a mapping of the effect's parameters.
 MAPPING_EFFECTS = {"springs": Springs, "payload": Payload, "motors": Motors,
-                   "controller_model": ControllerModel}
+                   "controller_model": ControllerModel, "friction": Friction,
+                   "joint_limits": JointLimits}
+# How a scene's validated mapping becomes the effect (with its cross-checks: windings all
+# three or none, Fs >= Fc, lower < upper, restitution or stiffness).
+BUILDERS = {"motors": Motors, "friction": Friction, "joint_limits": JointLimits.make}
 COMPENSATING = ("gravity_compensation", "command_gravity_compensation")
 
 
@@ -53,6 +60,10 @@ def scene_effects(scene, command=None) -> list[Effect]:
         effects.append(Damping(scene.damping))
     if scene.payload is not None:
         effects.append(Payload(scene.payload["mass"]))
+    if scene.friction is not None:                 # non-smooth: switched by events.py
+        effects.append(Friction(**scene.friction))
+    if scene.joint_limits is not None:
+        effects.append(JointLimits.make(**scene.joint_limits))
     return effects
 
 

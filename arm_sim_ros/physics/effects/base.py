@@ -99,6 +99,7 @@ class Effect:
 
     name = ""
     drives = False     # an input (the actuator): its force is added before the passive ones
+    switching = False  # non-smooth: its force depends on a mode that events.py switches
     state = ()         # names of the extra states it adds (winding currents), initially 0
 
     def constants(self, arm) -> dict:
@@ -111,6 +112,17 @@ class Effect:
 
     def forces(self) -> list[str]:
         """Lines adding this effect's generalized force to f1, f2."""
+        return []
+
+    def mode_forces(self, mode) -> list[str]:
+        """A switching effect's force lines in `mode` = (code1, code2, zone1, zone2), smooth
+        within it: code "+"/"-" sliding, "stuck", "lower"/"upper" resting on a hard limit
+        (those three fix the joint), "free"; zone 1/-1 beyond a compliant limit, else 0."""
+        return self.forces()
+
+    def guards(self, mode) -> list[tuple[str, str, int]]:
+        """Switching functions (expression, event kind, joint): `mode` holds while each
+        expression (of q1, q2, u1, u2 and the holding torques lam1, lam2) is >= 0."""
         return []
 
     def channels(self) -> tuple[Channel, ...]:

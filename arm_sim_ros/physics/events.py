@@ -1,0 +1,284 @@
+"""Non-smooth effects (friction, joint limits) switched at events located inside the step.
+
+Each joint has a mode (dynamics.mode_functions): a code, "+"/"-" sliding with friction,
+"stuck", "lower"/"upper" resting on a hard limit (those three fix the joint: a constraint
+whose holding torque lamᵢ comes out of the solve), "free"; and a zone, 1/-1 beyond a
+compliant limit, else 0. Within a mode the right-hand side is smooth, so RK4 keeps its
+order; the effects' switching functions g (Effect.guards) say when a mode ends (g < 0).
+
+A step is taken as before (the stability plan's equal sub-steps; more while a compliant
+limit is engaged, whose stiffness counts only then). After each sub-step the switching
+functions are evaluated; when one went negative the event is located by re-stepping from
+the sub-step's start with a shorter step (Illinois regula falsi, bracket < 1e-12 s), the
+switch is applied there (an impulse at an impact, q̇ᵢ = 0 exactly at a stop), and the step
+goes on from there in the new mode. It still ends exactly at the step boundary: the
+remaining time is re-split into equal sub-steps. `locate = False` switches at the end of
+the sub-step instead (first order; for the convergence test and benchmark).
+"""
+from __future__ import annotations
+
+from collections import Counter
+from math import ceil
+
+from . import model, stability
+from .dynamics import FIXED, mode_functions
+from .effects import Effect
+
+TIME_TOLERANCE = 1e-12    # s: an event's time is known to this (the bracket's width)
+MAX_EVENTS_PER_STEP = 64  # beyond this (chattering) the rest of the step switches unlocated
+REST_SPEED = 1e-4         # rad/s: a bounce slower than this (e < 1) ends at rest on the limit
+CONTACT_RESOLUTION = 0.25  # h_sub |λ| while a compliant limit is engaged: ~12 sub-steps a swing
+EMIT_FIRST = 5            # events reported one by one; then a summary at 10, 100, 1000 ...
+
+
+class Engaged(Effect):
+    """A compliant limit's stiffness and damping as the planner sees them while engaged."""
+
+    name = "joint_limits beyond"
+
+    def __init__(self, limits, arm):
+        self.decay, self.omega = limits.engaged_stiffness(arm), limits.engaged_frequency(arm)
+
+    def stiffness(self, arm) -> float:
+        return self.decay
+
+    def frequency(self, arm) -> float:
+        return self.omega
+
+
+def switching(dynamics, tableau, step, advance, substeps: int, emit, clock, counts=None):
+    """(the switching stepper, its advance) for a scene with non-smooth effects; (None,
+    `advance`, the plain planned step) without any: then nothing here runs. `emit(kind,
+    message)` reports, `clock()` is the step's start time, `counts` carries the counts on
+    (a payload grasped rebuilds the dynamics)."""
+    if not any(e.switching for e in dynamics.active):
+        return None, advance
+    stepper = Switching(dynamics, tableau, step, substeps, emit, clock, counts)
+    return stepper, stepper.advance
+
+
+class Switching:
+    def __init__(self, dynamics, tableau, step, substeps, emit, clock, counts=None):
+        self.dynamics, self.arm, self.step, self.emit = dynamics, dynamics.arm, step, emit
+        self.clock, self.counts = clock, Counter() if counts is None else counts
+        effects = {e.name: e for e in dynamics.active}
+        self.friction, self.limits = effects.get("friction"), effects.get("joint_limits")
+        self.hard = self.limits is not None and self.limits.hard
+        self.width = 4 + len(dynamics.extra)
+        names = ("q1", "q2", "u1", "u2") + dynamics.extra + dynamics.channels
+        self.impact_at = names.index("impact_loss") if "impact_loss" in names else None
+        self.substeps, self.engaged_rate = substeps, 0.0
+        if self.limits is not None and not self.hard:
+            # h |λ| of the engaged arm per unit step (the step size is the plan's business)
+            ratio, _, _ = stability.bound(tableau, list(dynamics.active)
+                                          + [Engaged(self.limits, self.arm)], self.arm, 1.0)
+            self.engaged_rate = ratio
+        self.locate = True                # False: switch at sub-step ends (first order)
+        self._functions = {}
+        self.mode, self._last = None, None
+
+    def reset(self) -> Counter:
+        """Forget the mode (found again from the next state) and the counts, which are
+        returned: Simulator.switch_events."""
+        self.counts.clear()
+        self.mode, self._last = None, None
+        return self.counts
+
+    # --- modes ---------------------------------------------------------------------------
+
+    def functions(self, mode):
+        """(rhs, probe, guard kinds) of a mode, compiled once."""
+        if mode not in self._functions:
+            guards = [g for e in self.dynamics.active if e.switching for g in e.guards(mode)]
+            rhs, probe, guard = mode_functions(self.dynamics, mode, [g[0] for g in guards])
+            self._functions[mode] = rhs, probe, guard, [g[1:] for g in guards]
+        return self._functions[mode]
+
+    def initial_mode(self, y) -> tuple:
+        codes, zones = [], [0, 0]
+        for i in (0, 1):
+            q, u, code = y[i], y[2 + i], "free"
+            if self.friction is not None:
+                code = "+" if u > 0 else "-" if u < 0 else "stuck"
+            if self.hard and u == 0.0 and q >= self.limits.upper[i]:
+                code = "upper"
+            elif self.hard and u == 0.0 and q <= self.limits.lower[i]:
+                code = "lower"
+            elif self.limits is not None and not self.hard:
+                zones[i] = 1 if q > self.limits.upper[i] else -1 if q < self.limits.lower[i] else 0
+            codes.append(code)
+        return (*codes, *zones)
+
+    def settle(self, y, mode) -> tuple:
+        """The mode with every fixed joint's holding torque admissible: within ±Fsᵢ when
+        stuck, pushing away from a hard limit it rests on. The worst violator is released
+        first (a stuck joint slips toward the net torque; a resting one comes free)."""
+        for _ in range(6):
+            lam = self.functions(mode)[1](*y[:self.width])[:2]
+            worst, which = 0.0, None
+            for i in (0, 1):
+                code = mode[i]
+                excess = (abs(lam[i]) - self.friction.static[i] if code == "stuck" else
+                          lam[i] if code == "upper" else -lam[i] if code == "lower" else 0.0)
+                if excess > worst:
+                    worst, which = excess, i
+            if which is None:
+                return mode
+            mode = self.release(mode, which, y, lam[which])
+        return mode
+
+    def release(self, mode, i, y, lam) -> tuple:
+        codes = list(mode[:2])
+        if codes[i] == "stuck":
+            up = lam < 0.0                        # slips toward the net torque
+            at = self.hard and (y[i] >= self.limits.upper[i] if up else y[i] <= self.limits.lower[i])
+            codes[i] = ("upper" if up else "lower") if at else ("+" if up else "-")
+        else:
+            codes[i] = "stuck" if self.friction is not None else "free"
+        return (*codes, *mode[2:])
+
+    def substeps_for(self, h: float, engaged: bool) -> int:
+        """The plan's sub-steps; while a compliant limit is engaged, enough to resolve it."""
+        if not engaged:
+            return self.substeps
+        return max(self.substeps, ceil(h * self.engaged_rate / CONTACT_RESOLUTION))
+
+    # --- stepping ------------------------------------------------------------------------
+
+    def advance(self, f, y, h):
+        """step(f, y, h) with every switch inside the step located and applied (f unused:
+        each mode has its own right-hand side)."""
+        if y is not self._last:                  # reset, or a state set from outside
+            self.mode = self.settle(y, self.initial_mode(y))
+        rhs, _, guard, kinds = self.functions(self.mode)
+        if self.substeps == 1 and not (self.mode[2] or self.mode[3]):   # the common case
+            y1 = self.step(rhs, y, h)
+            if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+                self._last = y1
+                return y1
+        remaining, events = h, 0
+        while remaining > 1e-15 * h:
+            mode = self.mode
+            rhs, _, guard, kinds = self.functions(mode)
+            cap = h / self.substeps_for(h, bool(mode[2] or mode[3]))
+            count = max(1, ceil(remaining / cap - 1e-9))
+            dt = remaining / count
+            for k in range(count):
+                y1 = self.step(rhs, y, dt)
+                if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+                    y = y1
+                    continue
+                elapsed = h - remaining + k * dt          # from the step's start
+                if self.locate and events < MAX_EVENTS_PER_STEP:
+                    t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed)
+                else:
+                    t, y = dt, self.apply(y1, self.fired(guard, kinds, y1), False, elapsed + dt)
+                events += 1
+                remaining -= k * dt + t
+                break
+            else:
+                remaining = 0.0
+        self._last = y = tuple(y)
+        return y
+
+    def fired(self, guard, kinds, y) -> list:
+        values = guard(*y[:self.width])
+        order = sorted(range(len(values)), key=values.__getitem__)
+        return [kinds[n] for n in order if values[n] < 0.0]
+
+    def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed):
+        """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
+        regula falsi on re-steps of length t from y0, to TIME_TOLERANCE."""
+        def g(t):
+            y = self.step(rhs, y0, t) if t > 0.0 else y0
+            return min(guard(*y[:self.width])), y
+
+        (ga, ya), (gb, yb) = g(0.0), g(dt)
+        a, b, side = 0.0, dt, 0
+        if ga < 0.0:                                  # already past (rounding): switch now
+            b, yb = 0.0, y0
+        for _ in range(200):
+            if b - a <= TIME_TOLERANCE:
+                break
+            t = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
+            if not a < t < b or side == 3:         # safeguard: bisect
+                t, side = 0.5 * (a + b), 0
+            gt, yt = g(t)
+            if gt < 0.0:
+                b, gb, yb = t, gt, yt
+                ga, side = (0.5 * ga, side + 1) if side > 0 else (ga, 1)
+            else:
+                a, ga, ya = t, gt, yt
+                gb, side = (0.5 * gb, side + 1) if side > 0 else (gb, 1)
+        fired = self.fired(guard, kinds, yb)
+        if fired and fired[0][0] == "impact":         # arrive, not pass: the state before
+            return a, self.apply(ya, fired[:1], at=elapsed + b)
+        return b, self.apply(yb, fired, at=elapsed + b)
+
+    # --- switches ------------------------------------------------------------------------
+
+    def apply(self, y, fired, located=True, at=0.0):
+        """The state and mode after the switches `fired` ((kind, joint), most negative g
+        first) at state y."""
+        y, mode = list(y), list(self.mode)
+        for kind, i in fired[:1] if fired and fired[0][0] == "impact" else fired:
+            if kind == "stop":
+                y[2 + i], mode[i] = 0.0, "stuck"
+            elif kind == "release":
+                mode[i] = "stuck" if self.friction is not None else "free"
+            elif kind == "enter":
+                mode[2 + i] = 1 if y[i] > self.limits.upper[i] else -1
+            elif kind == "leave":
+                mode[2 + i] = 0
+            elif kind == "impact":
+                impulse(self, y, mode, i, located)
+        self.mode = self.settle(y, tuple(mode))
+        for kind, i in fired[:1]:
+            if kind == "stop":
+                kind = "stick" if self.mode[i] == "stuck" else "reverse"
+            elif kind == "impact":
+                kind = "rest" if self.mode[i] in ("lower", "upper") else "impact"
+            self.count(kind, i, at)
+        return y
+
+    def count(self, kind: str, joint: int, at) -> None:
+        self.counts[kind] += 1
+        total = sum(self.counts.values())
+        when = f"{self.clock() + at:.9f} s"
+        if total <= EMIT_FIRST:
+            self.emit("switch", f"{kind} of joint {joint + 1} at t = {when}")
+        elif total >= 10 and str(total).rstrip("0") == "1":     # 10, 100, 1000 ...
+            counts = ", ".join(f"{k} {n}" for k, n in sorted(self.counts.items()))
+            self.emit("switch", f"{total} switches so far ({counts}); latest at t = {when}")
+
+
+def impulse(stepper, y, mode, i, located) -> None:
+    """Joint i arrives at a hard limit: q̇ᵢ -> −e q̇ᵢ by an impulse along it (a slow
+    bounce ends at rest); the other joint's velocity changes through M's coupling unless
+    it rests on a limit the impulse pushes it into. The kinetic energy lost is booked."""
+    j, limits = 1 - i, stepper.limits
+    upper = y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
+    if not located:                               # switched late: put it back on the limit
+        y[i] = limits.upper[i] if upper else limits.lower[i]
+    v = y[2 + i]
+    e = limits.restitution if limits.restitution * abs(v) >= REST_SPEED else 0.0
+    m11, m12, m22 = model.mass_matrix(stepper.arm, y[:2])
+    diagonal, other = (m11, m22) if i == 0 else (m22, m11)
+    coupling = -m12 / other                       # Δq̇ⱼ / Δq̇ᵢ for an impulse along i
+    held = mode[j] in ("lower", "upper") and (coupling * -v > 0) == (mode[j] == "upper")
+    if held:                                      # both joints' stops take the impulse
+        coupling, inverse = 0.0, 1.0 / diagonal
+    else:
+        inverse = other / (m11 * m22 - m12 * m12)   # (M⁻¹)ᵢᵢ
+    change = -(1.0 + e) * v
+    y[2 + i] = -e * v if e else 0.0
+    if coupling:
+        y[2 + j] += coupling * change
+        if stepper.friction is not None and mode[j] not in ("lower", "upper"):
+            mode[j] = "+" if y[2 + j] > 0 else "-" if y[2 + j] < 0 else "stuck"
+    if stepper.impact_at is not None:
+        y[stepper.impact_at] += 0.5 * (1.0 - e * e) * v * v / inverse
+    if e:
+        mode[i] = ("-" if upper else "+") if stepper.friction is not None else "free"
+    else:
+        mode[i] = "upper" if upper else "lower"
