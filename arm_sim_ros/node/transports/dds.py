@@ -2,8 +2,9 @@
 
 Mirrors the rclpy transport: a publisher of joint_states and /diagnostics, a subscription to
 joint_torque_commands, a tick timer and a 1 Hz diagnostics timer, plus the
-`ros_discovery_info` announcement that makes `ros2 node list` show the node. Parameters are
-set at start. Ticks can be driven from outside (tests, benchmarks) or by `spin()`.
+`ros_discovery_info` announcement that makes `ros2 node list` show the node, and the
+parameter services, `~/reset` and /parameter_events (dds_services.py). Ticks can be driven
+from outside (tests, benchmarks) or by `spin()`.
 """
 from __future__ import annotations
 
