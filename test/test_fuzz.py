@@ -131,3 +131,39 @@ def test_ros_args_resolve_or_are_refused_in_one_line(assignments, extra):
         assert "\n" not in str(error)
         return
     assert math.isfinite(config.scene.step_size)
+
+
+# The environment ROS 2 users set: a node started with any of it runs or refuses in one line.
+env_values = st.fixed_dictionaries({}, optional={
+    "ROS_DOMAIN_ID": st.one_of(st.integers(-5, 300).map(str), st.text(string.printable, max_size=6)),
+    "ROS_AUTOMATIC_DISCOVERY_RANGE": st.one_of(
+        st.sampled_from(["SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT", "", "localhost"]),
+        st.text(string.ascii_letters, max_size=8)),
+    "CYCLONEDDS_URI": st.one_of(
+        st.sampled_from(["", "<bad", "file:///nonexistent.xml", "<CycloneDDS/>",
+                         "<General><Interfaces><NetworkInterface name='nope0'/></Interfaces></General>",
+                         "<Discovery><ParticipantIndex>none</ParticipantIndex></Discovery>"]),
+        st.text(string.printable, max_size=20)),
+    "ROS_STATIC_PEERS": st.sampled_from(["", "127.0.0.1", "not a host;;", "::1"]),
+})
+
+
+@settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 150)) // 8, deadline=None,
+          derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
+          suppress_health_check=[HealthCheck.too_slow])
+@given(env=env_values)
+def test_the_node_under_any_ros_environment_runs_or_refuses_in_one_line(env):
+    import subprocess
+    import sys
+
+    full = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "CYCLONEDDS"))}
+    full.update({k: v.replace("\x00", "") for k, v in env.items()})
+    if "ROS_DOMAIN_ID" not in env:
+        full["ROS_DOMAIN_ID"] = "97"                      # away from the other tests' domains
+    done = subprocess.run([sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds",
+                           "--duration", "0", "--quiet"], env=full, capture_output=True,
+                          text=True, timeout=60)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert done.returncode in (0, 2), done.stderr
+    if done.returncode == 2:
+        assert len(done.stderr.strip().splitlines()) == 1, done.stderr

@@ -127,11 +127,11 @@ def test_discovery_defaults_to_subnet_with_nothing_added():
 
 def test_localhost_range_disables_multicast_and_peers_localhost_then_user_config():
     text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-                               "ROS_STATIC_PEERS": "10.0.0.2; robot.local",
+                               "ROS_STATIC_PEERS": "10.0.0.2; localhost",
                                "CYCLONEDDS_URI": "file:///user.xml"})
     assert "<AllowMulticast>false</AllowMulticast>" in text
     assert '<Peers><Peer address="localhost"/><Peer address="10.0.0.2"/>' \
-           '<Peer address="robot.local"/></Peers>' in text
+           '<Peer address="localhost"/></Peers>' in text
     assert text.endswith(",file:///user.xml")  # the user's file is read last and wins
 
 
@@ -159,7 +159,7 @@ def test_subnet_keeps_multicast_and_adds_static_peers():
 
 
 def test_off_range_isolates_the_process():
-    text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": "h"})
+    text = m.discovery_config({"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": "10.0.0.3"})
     assert "<Tag>ros_discovery_off_" in text and "Peer" not in text
 
 
@@ -175,3 +175,10 @@ def test_domain_id_from_env_is_checked():
     for bad in ("abc", "-1", "300"):
         with pytest.raises(m.DiscoveryError, match="ROS_DOMAIN_ID"):
             m.domain_id_from_env({"ROS_DOMAIN_ID": bad})
+
+
+@pytest.mark.parametrize("peers", ["robot.invalid", "not a host", "::1"])
+def test_a_static_peer_cyclone_cannot_resolve_is_refused_instead_of_aborting(peers):
+    """Cyclone DDS aborts the process (SIGABRT, no message) on such a peer."""
+    with pytest.raises(m.DiscoveryError, match="ROS_STATIC_PEERS"):
+        m.discovery_config({"ROS_STATIC_PEERS": peers})

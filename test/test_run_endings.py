@@ -62,7 +62,7 @@ def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_nam
     started = time.monotonic()
     process.send_signal(getattr(signal, signal_name))
     out, err = process.communicate(timeout=30)
-    assert time.monotonic() - started < 5.0
+    assert time.monotonic() - started < 20.0         # a hang guard, not a timing
     assert process.returncode == 130, err
     assert "Traceback" not in err and f"interrupted ({signal_name}) at t = " in err
     result = strict_json(out)

@@ -25,7 +25,7 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.util import duration
 
 from .wire_errors import (DiscoveryError, check_topic_name, cyclone_messages, cyclone_reason,
-                          refused_configuration)
+                          refused_configuration, static_peers)
 
 
 # --- builtin_interfaces / std_msgs -------------------------------------------------------
@@ -289,7 +289,7 @@ def discovery_config(env=None) -> str:
     if text and text not in DISCOVERY_RANGES:   # rmw warns and uses LOCALHOST: say it instead
         raise DiscoveryError(f"ROS_AUTOMATIC_DISCOVERY_RANGE={text!r} is not one of "
                              f"{', '.join(DISCOVERY_RANGES)}; set one of them or unset it")
-    peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
+    peers = static_peers(env)
     user_uri = env.get("CYCLONEDDS_URI", "")
     add_localhost = scope == "LOCALHOST"
     add_peers = scope in ("SUBNET", "LOCALHOST")

@@ -8,6 +8,7 @@ reported with Cyclone's own reason, which it would otherwise print on stderr by 
 """
 import os
 import re
+import socket
 import sys
 import tempfile
 from contextlib import contextmanager
@@ -82,3 +83,17 @@ def refused_configuration(env_uri: str, explicit: bool, reason: str) -> Discover
                               f"refuses ({reason}); fix it or unset CYCLONEDDS_URI")
     return DiscoveryError(f"Cyclone DDS refuses the configuration built from ROS_STATIC_PEERS "
                           f"and ROS_AUTOMATIC_DISCOVERY_RANGE ({reason}); fix or unset them")
+
+
+def static_peers(env) -> list:
+    """ROS_STATIC_PEERS as a list of hosts, each checked: Cyclone aborts the whole process
+    (SIGABRT, no message) on a peer it cannot resolve, or an IPv6 one while it runs on
+    IPv4 (its default), so those are refused here."""
+    peers = [p.strip() for p in env.get("ROS_STATIC_PEERS", "").split(";") if p.strip()]
+    for peer in peers:
+        try:
+            socket.getaddrinfo(peer, None, socket.AF_INET)
+        except (socket.gaierror, UnicodeError, ValueError):
+            raise DiscoveryError(f"ROS_STATIC_PEERS: {peer!r} is not an IPv4 address or a host "
+                                 "name this machine can resolve; list peers as host;host") from None
+    return peers

@@ -272,14 +272,23 @@ def _believed_gravity(scene: Scene, v: dict, arm: _ArmArrays):
     return (*_arm_arrays(v | named, payload=payload).gravity_coefficients, gravity)
 
 
-def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0) -> dict:
+PROGRESS_PARTS = 100      # a long batch reports its progress this many times
+
+
+def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int = 0,
+               progress=None) -> dict:
     """Arms around the scene's initial pose (uniform +-0.5 rad), timed; with a spot check of
-    three arms against the single-arm simulator."""
+    three arms against the single-arm simulator. `progress(steps done)` is called in
+    between PROGRESS_PARTS parts of the run when given."""
     rng = np.random.default_rng(seed)
     positions = np.asarray(scene.initial_positions) + rng.uniform(-0.5, 0.5, (count, 2))
     batch = Batch(scene, positions, count=count)
+    part = max(1, steps // PROGRESS_PARTS) if progress is not None else max(steps, 1)
     start = time.perf_counter()
-    batch.run(steps, threads)
+    for done in range(0, steps, part):
+        batch.run(min(part, steps - done), threads)
+        if progress is not None:
+            progress(min(done + part, steps))
     elapsed = time.perf_counter() - start
     worst = 0.0
     for i in sorted({0, count // 2, count - 1}):

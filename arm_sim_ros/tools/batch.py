@@ -7,6 +7,7 @@ from math import isfinite
 from ..physics.batch import throughput
 from ..usage import UsageError
 from .arguments import add_scene_arguments, scene_from_args
+from .progress import Progress
 
 
 MAX_THREADS = 256
@@ -35,7 +36,9 @@ def cmd_batch(args) -> int:
     if not (isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration {args.duration:g} must be a positive number of seconds")
     steps = scene.steps_for(args.duration)
-    r = throughput(scene, args.count, steps, args.threads, args.seed)
+    with Progress(steps * scene.step_size, f"arm-sim batch {scene.name}") as progress:
+        r = throughput(scene, args.count, steps, args.threads, args.seed,
+                       lambda done: progress.update(done * scene.step_size))
     print(f"scene {scene.name}: {r['arms']} arms x {r['steps']} RK4 steps of {scene.step_size:g} s "
           f"on {r['threads']} thread(s) in {r['seconds']:.3f} s wall")
     print(f"throughput {r['arm_steps_per_s'] / 1e6:.2f} M arm-steps/s; "
