@@ -11,6 +11,11 @@ the node and `arm-sim run --rerun` take, each side by side with the same loop ba
 - per-sample rr.log: one rr.log per channel per step, energies from model's scalar
   functions, the drawing at the same 200 frames/s: what a straightforward sink costs.
 
+What a recorder writes per step (issue 17): every readout on three timelines (sim_time,
+ros_time, log_time), the 2D drawing and, for the URDF's arm, the 3D joints and torque arrows
+at 200 frames/s, and on the node one story row per tick; all of it built in the sender
+thread, so the simulation thread's cost is the copy of the states and a tuple per tick.
+
 Columns: wall µs/step of the stepping loop (what the simulation feels), with its spread over
 the rounds; CPU µs/step of the simulation thread; marginal CPU µs/step of the whole process
 including the sender thread and rerun's encoder threads (runs of N and 2N steps, so the fixed

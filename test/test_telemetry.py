@@ -43,7 +43,9 @@ SCENES = {  # scene: the entities its effects add
     "motor_windings_hold": {GRAVITY} | WINDINGS,
     "effort_limited_hold": {GRAVITY, WORK, TORQUE},
     "wrong_payload_model": {GRAVITY, WORK, TORQUE, "books/input/payload_exchange"},
-    "geared_arm": {GRAVITY, "books/loss/dissipated", "books/input/payload_exchange"} | WINDINGS,
+    "geared_arm": {GRAVITY, "books/loss/dissipated", "books/input/payload_exchange",
+                   "joints/commanded_torque", "books/loss/friction_loss",
+                   "books/stored/joint_limits"} | WINDINGS,
 }
 EFFECT_PRESETS = ["per_joint_damping", "springs_oscillation", "payload_release",
                   "geared_release", "motor_windings_hold", "effort_limited_hold",
@@ -60,10 +62,10 @@ def read_back(path):
             continue
         batch = chunk.to_record_batch()
         for field in batch.schema:
-            if field.name in ("rerun.controls.RowId", "log_time", "log_tick"):
+            if field.name in ("rerun.controls.RowId", "log_tick"):
                 continue
             column = batch.column(field.name)
-            if pa.types.is_duration(column.type):
+            if pa.types.is_duration(column.type) or pa.types.is_timestamp(column.type):
                 column = column.cast(pa.int64())
             values = column.to_pylist()
             if field.name.startswith("TextLog:") or field.name == "LineStrips2D:strips" and (
@@ -98,7 +100,8 @@ def stored_parts(sim, state) -> dict:
     for effect in sim.dynamics.active:
         if readouts.stores_energy(effect):
             own = tuple(extra[sim.extra.index(name)] for name in effect.state)
-            parts[readouts.STORED_PARTS[effect.name]] = effect.stored_energy(sim.arm, q, own)
+            parts[readouts.STORED_PARTS.get(effect.name, effect.name)] = effect.stored_energy(
+                sim.arm, q, own)
     return parts
 
 
@@ -222,7 +225,8 @@ def test_every_effect_records_its_channels_by_name_equal_to_the_core(recordings,
     torque the joints receive, row for row as the Simulator has them; an effect the scene
     lacks has no entity (no copper loss without windings, no dissipation without damping)."""
     rows, columns, _ = recordings(name)
-    assert set(columns) == ALWAYS | SCENES[name]
+    # (the 3D arm, arm3d/*, is test_recording_story.py's)
+    assert {e for e in columns if not e.startswith("arm3d/")} == ALWAYS | SCENES[name]
     assert_equals_core(columns, rows)
     sim = Simulator(load_scene(name))
     for channel in sim.channels:     # by name, whatever its kind
@@ -327,7 +331,7 @@ def test_series_names_use_only_glyphs_the_viewer_can_draw():
     assert blueprint.drawable("E = q̇ᵀMq̇/2, Ø 43.5 mm") == "E = q̇TMq̇/2, ? 43.5 mm"
 
 
-def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
+def test_arm_drawing_is_the_models_arm_y_up_and_the_view_flips_it(tmp_path):
     scene = load_scene("release").replace(step_size=0.001, duration=0.1,
                                           link_lengths=(0.8, 1.2), com_distances=(0.4, 0.5))
     samples, _ = record(scene, tmp_path / "drawn.rrd")
@@ -337,7 +341,7 @@ def test_arm_drawing_is_the_models_arm_with_y_negated(tmp_path):
     assert columns["arm/links"]["sim_time"] == [round(s.t * 1e9) for s in frames]
     for sample, strips, joints in zip(frames, columns["arm/links"]["LineStrips2D:strips"],
                                       columns["arm/joints"]["Points2D:positions"]):
-        base, elbow, tip = (np.array([x, -y]) for x, y in model.link_points(scene.arm, sample.q))
+        base, elbow, tip = (np.array(p) for p in model.link_points(scene.arm, sample.q))
         # Rerun stores 2D positions as float32.
         assert np.allclose(np.array(strips), [[base, elbow], [elbow, tip]], atol=2e-7, rtol=0)
         assert np.allclose(np.array(joints), [base, elbow, tip], atol=2e-7, rtol=0)
@@ -433,9 +437,9 @@ def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
     sends = []
     original = telemetry.RerunRecorder._send
     monkeypatch.setattr(telemetry.RerunRecorder, "_send",
-                        lambda self, sim, runs, states, events: (
+                        lambda self, sim, runs, states, *rest: (
                             sends.append(sum(steps for _, _, steps in runs)),
-                            original(self, sim, runs, states, events)))
+                            original(self, sim, runs, states, *rest)))
     samples, _ = record(scene, tmp_path / "batched.rrd")
     assert sends == [37] * 6 + [251 - 37 * 6]
     columns = read_back(tmp_path / "batched.rrd")
@@ -506,7 +510,7 @@ def test_vectorised_drawing_equals_the_models_link_points():
     elbow, tip = readouts.drawing_points(arm, q1, q2)
     for i in range(500):
         _, (ex, ey), (tx, ty) = model.link_points(arm, (q1[i], q2[i]))
-        assert np.allclose([*elbow[i], *tip[i]], [ex, -ey, tx, -ty], atol=TOL, rtol=0)
+        assert np.allclose([*elbow[i], *tip[i]], [ex, ey, tx, ty], atol=TOL, rtol=0)
 
 
 @pytest.mark.parametrize("name", EFFECT_PRESETS + ["release", "moving_gravity_compensation"])
@@ -567,9 +571,9 @@ def effects_document(path):
                     "|  | armature N²J | 0.181, 0.04525 | kg m² |",
                     "| damping | d | 0.05 | N m s/rad |",
                     "| payload | mass | 0.3 | kg |",
-                    "- E: kinetic + gravity + windings",
+                    "- E: kinetic + gravity + windings + joint_limits",
                     "- inputs: electrical_input, payload_exchange",
-                    "- losses: copper_loss, dissipated",
+                    "- losses: copper_loss, dissipated, friction_loss",
                     "- extra state: i1, i2 (A)"], ["springs", "controller_model"]),
     ("springs_oscillation", ["| springs | stiffness | 20, 5 | N m/rad |",
                              "|  | rest_positions | 0.5, -0.5 | rad |", "- E: kinetic + springs"],

@@ -34,7 +34,8 @@ class ArmSimCore:
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
-                                     else make_recorder(config, log), self.sim)
+                                     else make_recorder(config, log), self.sim,
+                                     stamp_origin_ns=self.start_stamp_ns)
         self._event(f"scene {config.scene.name} started: policy {config.scene.policy}, "
                     f"h = {config.scene.step_size:g} s, {config.steps_per_tick} steps per tick")
 
@@ -78,7 +79,8 @@ class ArmSimCore:
                 self._set_payload(config.values["payload_mass"])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder.finish()
-            self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim)
+            self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim,
+                                         stamp_origin_ns=self.start_stamp_ns)
         return changed
 
     def _event(self, text: str) -> None:
@@ -137,7 +139,7 @@ class ArmSimCore:
     def _advance(self) -> None:
         sim = self.sim
         before = (sim.state, sim.steps)
-        self.recorder.step(self.config.steps_per_tick)
+        self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
         if sim.holding or not all(isfinite(v) for v in sim.state):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.

@@ -1,8 +1,16 @@
 """The node's Rerun recorder, if it has one: steps handed over in batches, everything else
 in order after them, and a recorder that fails dropped with one error line (telemetry must
 never stop the simulation).
+
+The node's story goes with the steps, one row per tick (recorders with `node_ticks`): the
+commands refused during the tick, whether it came late, the real-time factor and its
+sub-steps: a tuple per tick here, the numbers worked out in the recorder's sender thread
+(recording/story.py). The recorder
+learns the stamp origin (`for_node`) so that its ros_time timeline is the JointState stamps.
 """
 from __future__ import annotations
+
+import time
 
 # Steps collected before the recorder gets them in one call: 0.1 s behind at the default one
 # step a tick; collecting 50 measured slower than 10 (the kept states fall out of cache).
@@ -24,9 +32,15 @@ def make_recorder(config, log):
 
 
 class RecorderLink:
-    def __init__(self, log, recorder, sim):
+    def __init__(self, log, recorder, sim, stamp_origin_ns: int | None = None):
         self.log, self.recorder, self.sim = log, recorder, sim
         self._unrecorded = []             # states of steps the recorder has not seen yet
+        self._ticks = []                  # (sim.steps, story values) of those steps' ticks
+        self._refused = 0                 # commands refused since the last tick
+        self.stamp_origin_ns = stamp_origin_ns
+        self._story = hasattr(recorder, "node_ticks")
+        if hasattr(recorder, "for_node"):
+            self.call("for_node", stamp_origin_ns)
         self.call("start", sim)
 
     def start(self, sim) -> None:
@@ -47,14 +61,22 @@ class RecorderLink:
             self.recorder = None
 
     def event(self, text: str, level: str = "info") -> None:
-        """A line in the recording's events, at the level the node logged it."""
+        """A line in the recording's events, at the level the node logged it (a refused
+        command is also counted in the tick's story)."""
+        if text.startswith("refused command"):
+            self._refused += 1
         self.call("event", text, level)
 
-    def step(self, steps: int) -> None:
-        """`steps` physics steps, each seen by the recorder: their states collected and
-        handed over in one step_batch(sim, states) call per RECORD_EVERY steps when it has
-        one (a Python call per step, or per tick at one step a tick, costs more than
-        logging's 10 % budget), else step(sim) after every step."""
+    def step(self, steps: int, wall_now: float | None = None,
+             late_ticks: int | None = None) -> None:
+        """One tick's `steps` physics steps, each seen by the recorder: their states
+        collected and handed over in one step_batch(sim, states) call per RECORD_EVERY steps
+        when it has one (a Python call per step, or per tick at one step a tick, costs more
+        than logging's 10 % budget), else step(sim) after every step. `wall_now` (the core's
+        clock at the tick; default time.monotonic()) and `late_ticks` (the core's count;
+        default: not recorded) make the tick's story."""
+        if self._story and self.recorder is not None:
+            self._tell(steps, time.monotonic() if wall_now is None else wall_now, late_ticks)
         sim, recorder = self.sim, self.recorder
         advance = sim.step
         if recorder is None:
@@ -72,10 +94,20 @@ class RecorderLink:
                 advance()
                 self.call("step", sim)
 
+    def _tell(self, steps: int, wall: float, late_ticks: int | None) -> None:
+        """The tick's story, kept with its steps (which come next) as noted: story.TickStory."""
+        sim = self.sim
+        self._ticks.append((sim.steps + steps, (wall, late_ticks, self._refused, steps,
+                                                sim.step_size, sim.substeps)))
+        self._refused = 0
+
     def hand_over(self) -> None:
         states, self._unrecorded = self._unrecorded, []
+        ticks, self._ticks = self._ticks, []
         if states:
             self.call("step_batch", self.sim, states)
+        if ticks and states:
+            self.call("node_ticks", self.sim, ticks)
 
     def finish(self) -> None:
         self.call("finish", self.sim)

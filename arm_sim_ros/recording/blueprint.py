@@ -13,9 +13,11 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..physics.effects import MAPPING_EFFECTS, EffortLimits
-from .readouts import KINDS, channel_path, extra_paths, stored_path
+from .readouts import COMMANDED, KINDS, channel_path, extra_paths, stored_path
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
+ROS_TIME = "ros_time"            # the JointState stamp of each row: stamp origin + sim_time
+LOG_TIME = "log_time"            # wall clock when the recorder received the row (Rerun's log time)
 TRACE_SECONDS = 2.0              # the tip trace shows this much simulated time up to the cursor
 EFFECTS_PATH = "scene/effects"   # the effects document (markdown, static)
 
@@ -51,8 +53,25 @@ JOINT_SERIES = {  # path: (title, series names)
     "joints/current": ("winding current (A)", ("i1 shoulder", "i2 elbow")),
 }
 JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
+COMMANDED_SERIES = ("τ1 commanded", "τ2 commanded")
+COMMANDED_COLORS = ((40, 130, 255), (255, 110, 40))  # beside the applied torque's cyan, amber
+# The node's story, one row per tick (node/recorder_link.py): (view title, series name,
+# unit, colour).
+NODE_SERIES = {
+    "node/commands_refused": ("Refused commands / tick", "refused commands in the tick",
+                              "1/tick", (255, 90, 90)),
+    "node/late_ticks": ("Late ticks", "late: > 1.5 periods after the last tick", "1/tick",
+                        (255, 170, 60)),
+    "node/real_time_factor": ("Real-time factor", "simulated s / wall s over 0.1 s", "1",
+                              (110, 230, 110)),
+    "node/substeps": ("Sub-steps / tick", "RK sub-steps in the tick", "1/tick", (90, 180, 255)),
+}
+UNITS = {"energy": "J", "books": "J", "joints/angle": "rad", "joints/velocity": "rad/s",
+         "joints/torque": "N m", COMMANDED: "N m", "joints/current": "A"}
 TRACE_COLOR = (190, 190, 190)     # neutral: violet is the residual's
 HORIZON_COLOR = (100, 100, 100)
+# The physics' y up into the 2D view's y down: the arm's drawing is stored as the physics has it.
+FLIP = rr.Transform3D(scale=[1.0, -1.0, 1.0])
 
 
 def drawable(text: str) -> str:
@@ -90,7 +109,26 @@ def series(snap) -> dict:
     for path in joint_paths(snap):
         names = joint_series(path)[1]
         out[path] = (names, JOINT_COLORS[:len(names)], (NARROW,) * len(names))
+    if snap.commanded:
+        out[COMMANDED] = (COMMANDED_SERIES, COMMANDED_COLORS, (NARROW, NARROW))
     return out
+
+
+def node_series() -> dict:
+    """{entity path: (series names, colours, widths)} of the node's per-tick story."""
+    return {path: ((name,), (color,), (NARROW,))
+            for path, (_, name, _, color) in NODE_SERIES.items()}
+
+
+def unit(path: str) -> str:
+    """The unit of an entity's values ("1": a plain number, "" if unknown)."""
+    if path in NODE_SERIES:
+        return NODE_SERIES[path][2]
+    while path:
+        if path in UNITS:
+            return UNITS[path]
+        path = path.rpartition("/")[0]
+    return ""
 
 
 def joint_paths(snap) -> list[str]:
@@ -117,15 +155,42 @@ def reach(arm) -> float:
     return 1.1 * sum(arm.link_lengths)
 
 
-def blueprint(snap, live: bool) -> rrb.Blueprint:
-    """Arm, effects and events on the left; the energy books, the energy levels and the
-    joints on the right."""
+def torque_view(snap, path: str) -> rrb.TimeSeriesView:
+    """A joint's view; with commands, the torque view shows the commanded beside the applied."""
+    if path == "joints/torque" and snap.commanded:
+        return rrb.TimeSeriesView(name="Joint torque commanded vs applied (N m)",
+                                  contents=[path, COMMANDED])
+    return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}", origin=path)
+
+
+def node_views() -> list:
+    """The node's story: one small view per per-tick series."""
+    return [rrb.TimeSeriesView(name=title, origin=path, plot_legend=rrb.PlotLegend(visible=False))
+            for path, (title, _, _, _) in NODE_SERIES.items()]
+
+
+def arm3d_view(arm) -> rrb.Spatial3DView:
+    """The URDF arm (recording/arm3d.py), y up (the floor grid is V = 0), seen from the
+    front right and above, so the torque arrows along z show."""
+    extent = reach(arm)
+    return rrb.Spatial3DView(
+        name="Arm in 3D (URDF): COMs, torques along z, g", origin="arm3d",
+        eye_controls=rrb.EyeControls3D(position=(0.6 * extent, 0.4 * extent, 1.35 * extent),
+                                       look_target=(0.0, 0.0, 0.0),
+                                       eye_up=(0.0, 1.0, 0.0)))
+
+
+def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
+    """Arm, effects and events on the left; the energy books, the energy levels, the joints
+    and (for the node) its story per tick on the right."""
     extent = reach(snap.arm)
     trace_range = rrb.VisibleTimeRanges(
         timeline=TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRACE_SECONDS),
         end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
+    # The arm is stored y up, as the physics has it; FLIP (logged at "arm") turns it for
+    # the 2D view, whose y axis points down, so the bounds are in the viewer's frame.
     arm_view = rrb.Spatial2DView(
-        name="Arm (y up, V = 0 on the grey line)", origin="arm",
+        name="Arm (y up, V = 0 on the grey line)", origin="/", contents=["+ arm/**"],
         visual_bounds=rrb.VisualBounds2D(x_range=[-extent, extent], y_range=[-extent, extent]),
         overrides={"arm/tip_trace": trace_range})
     legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
@@ -136,16 +201,20 @@ def blueprint(snap, live: bool) -> rrb.Blueprint:
         name="Energy E (J)", plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftBottom),
         contents=[TOTAL] + [channel_path(n, k) for n, k in snap.kinds.items()
                             if k == "transfer"])
-    joints = [rrb.TimeSeriesView(name=f"Joint {joint_series(p)[0]}", origin=p)
-              for p in joint_paths(snap)]
+    if snap.arm3d is not None:
+        arm_view = rrb.Horizontal(arm_view, arm3d_view(snap.arm))
+    joints = [torque_view(snap, p) for p in joint_paths(snap)]
+    right = [books, levels, rrb.Horizontal(*joints)]
+    if node:
+        right.append(rrb.Horizontal(*node_views()))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(arm_view,
                          rrb.TextDocumentView(name="Effects the scene calls for",
                                               origin=EFFECTS_PATH),
                          rrb.TextLogView(name="Events", origin="events"),
-                         row_shares=[3, 6, 2]),
-            rrb.Vertical(books, levels, rrb.Horizontal(*joints), row_shares=[5, 2, 2]),
+                         row_shares=[4, 4, 2]),
+            rrb.Vertical(*right, row_shares=[5, 2, 2, 2][:len(right)]),
             column_shares=[2, 3]),
         rrb.TimePanel(timeline=TIMELINE, play_state="following" if live else "paused",
                       state="collapsed"),
@@ -217,15 +286,17 @@ def effects_document(snap) -> str:
     return drawable("\n".join(lines) + "\n")
 
 
-def styles(snap) -> list:
-    """(entity path, archetype) of what does not change from step to step, to log static:
-    the series' names and colours, the effects document, the horizon, and how links,
-    joints and trace are drawn."""
-    static = [(path, rr.SeriesLines(names=[drawable(n) for n in names], colors=list(colors),
-                                    widths=list(widths)))
-              for path, (names, colors, widths) in series(snap).items()]
+def styles(snap, node: bool = False) -> list:
+    """(entity path, [archetypes]) of what does not change from step to step, to log static:
+    the series' names, colours and units, the effects document, the flip of the arm's
+    drawing into the viewer's frame, the horizon, and how links, joints and trace are drawn."""
+    styled = series(snap) | (node_series() if node else {})
+    static = [(path, [rr.SeriesLines(names=[drawable(n) for n in names], colors=list(colors),
+                                     widths=list(widths)), rr.AnyValues(unit=unit(path))])
+              for path, (names, colors, widths) in styled.items()]
     extent = reach(snap.arm)
-    return static + [
+    return static + [(path, [archetype]) for path, archetype in [
+        ("arm", FLIP),
         (EFFECTS_PATH, rr.TextDocument(effects_document(snap), media_type=rr.MediaType.MARKDOWN)),
         ("arm/horizon", rr.LineStrips2D([[(-extent, 0.0), (extent, 0.0)]], colors=[HORIZON_COLOR],
                                         radii=[0.004], draw_order=0.0)),
@@ -235,4 +306,4 @@ def styles(snap) -> list:
                                                draw_order=[30.0])),
         ("arm/tip_trace", rr.LineStrips2D.from_fields(colors=[TRACE_COLOR], radii=[0.008],
                                                       draw_order=[10.0])),
-    ]
+    ]]

@@ -8,7 +8,7 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from .blueprint import TIMELINE
+from .blueprint import LOG_TIME, ROS_TIME, TIMELINE
 
 
 def nanoseconds(seconds):
@@ -18,6 +18,16 @@ def nanoseconds(seconds):
 
 def time_column(ns):
     return rr.TimeColumn(TIMELINE, duration=ns)
+
+
+def time_columns(ns, wall_ns, stamp_origin_ns=None):
+    """The rows' timelines: sim_time (`ns`, timedelta64), log_time (`wall_ns`, ns since the
+    epoch) and, with a stamp origin, ros_time = stamp_origin_ns + sim_time."""
+    columns = [time_column(ns), rr.TimeColumn(LOG_TIME, timestamp=wall_ns.astype("datetime64[ns]"))]
+    if stamp_origin_ns is not None:
+        stamps = ns.astype(np.int64) + np.int64(stamp_origin_ns)
+        columns.append(rr.TimeColumn(ROS_TIME, timestamp=stamps.astype("datetime64[ns]")))
+    return columns
 
 
 def _column(descriptor, batch, items: int, per_row: int):
@@ -56,3 +66,28 @@ def strips(points, strips_per_row=1):
                                      _vertices(points, kind.value_type), type=kind)
     return _column(rr.LineStrips2D.descriptor_strips(), rr.components.LineStrip2DBatch(batch),
                    count, strips_per_row)
+
+
+def vectors3d(vectors):
+    """(rows, 3) vectors as an Arrows3D vectors column of one arrow per row."""
+    kind = rr.components.Vector3DBatch._ARROW_DATATYPE
+    return _column(rr.Arrows3D.descriptor_vectors(),
+                   rr.components.Vector3DBatch(_vertices(vectors, kind)), len(vectors), 1)
+
+
+def joint_transforms(xyzw, translation, parent: str, child: str):
+    """A Transform3D column set of one transform per row: (rows, 4) rotations, a fixed
+    translation and the frames it joins (the viewer needs those in each row)."""
+    rows = len(xyzw)
+    rotation = rr.components.RotationQuatBatch(
+        _vertices(xyzw, rr.components.RotationQuatBatch._ARROW_DATATYPE))
+    shift = rr.components.Translation3DBatch(_vertices(
+        np.broadcast_to(np.asarray(translation, np.float32), (rows, 3)),
+        rr.components.Translation3DBatch._ARROW_DATATYPE))
+    frames = [rr.components.TransformFrameIdBatch(
+        pa.DictionaryArray.from_arrays(np.zeros(rows, np.int32), pa.array([name])).cast(pa.utf8()))
+        for name in (parent, child)]
+    return (_column(rr.Transform3D.descriptor_quaternion(), rotation, rows, 1)
+            + _column(rr.Transform3D.descriptor_translation(), shift, rows, 1)
+            + _column(rr.Transform3D.descriptor_parent_frame(), frames[0], rows, 1)
+            + _column(rr.Transform3D.descriptor_child_frame(), frames[1], rows, 1))

@@ -11,6 +11,7 @@ path (the names below; blueprint.py gives them series names, colours and places)
     books/stored/<part>      change since t = 0 of kinetic and each effect's stored energy
     books/<kind>/<channel>   every channel of the scene by name (kind: input, loss, transfer)
     joints/angle, joints/velocity, joints/torque (with a drive), joints/current (windings)
+    joints/commanded_torque  the command held at each step (command policies)
 
 With books/stored/* + inputs - losses the residual closes: Σ stored changes - Σ inputs +
 Σ losses = energy/balance_residual (transfer channels, e.g. the motors' work on the joints
@@ -28,6 +29,7 @@ from ..physics.effects import Effect
 STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
 KINDS = ("input", "loss", "transfer")
 CURRENTS = ("i1", "i2")           # the windings' extra states (A)
+COMMANDED = "joints/commanded_torque"
 
 
 def stores_energy(effect) -> bool:
@@ -67,6 +69,8 @@ class Snapshot:
         self.stores = tuple((STORED_PARTS.get(e.name, e.name), e, self._extra_of(e))
                             for e in dynamics.active if stores_energy(e))
         self.drives = any(e.drives for e in dynamics.active)
+        self.commanded = sim.scene.policy.startswith("command")
+        self.arm3d = None         # the recorder's 3D arm (arm3d.Arm3D), when the URDF is this arm
         self.initial_energy = sim.initial_energy
         self._torque = vectorised(dynamics.torque_function) if self.drives else None
         if initial is None:
@@ -91,7 +95,8 @@ class Snapshot:
     @property
     def key(self) -> tuple:
         """What the blueprint and the series' styles depend on."""
-        return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives)
+        return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
+                self.commanded)
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -158,6 +163,9 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     values["joints/angle"], values["joints/velocity"] = states[:, 0:2], states[:, 2:4]
     if snap.drives:
         values["joints/torque"] = snap.joint_torque(states, commands)
+    if snap.commanded:
+        values[COMMANDED] = (commands if commands is not None
+                             else np.zeros((len(states), 2)))
     for path, names in extra_paths(snap.extra).items():
         at = [4 + snap.extra.index(name) for name in names]
         values[path] = states[:, at] if len(at) > 1 else states[:, at[0]]
@@ -165,10 +173,11 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
 
 
 def drawing_points(arm, q1, q2):
-    """Elbow and tip of many configurations, y negated: the viewer's 2D y axis points down."""
+    """Elbow and tip of many configurations, in the physics' coordinates (y up); the view
+    flips them for the viewer's 2D y axis, which points down (blueprint.FLIP)."""
     l1, l2 = arm.link_lengths
-    elbow = np.column_stack((l1 * np.cos(q1), -l1 * np.sin(q1)))
-    tip = elbow + np.column_stack((l2 * np.cos(q1 + q2), -l2 * np.sin(q1 + q2)))
+    elbow = np.column_stack((l1 * np.cos(q1), l1 * np.sin(q1)))
+    tip = elbow + np.column_stack((l2 * np.cos(q1 + q2), l2 * np.sin(q1 + q2)))
     return elbow, tip
 
 

@@ -1,17 +1,23 @@
 """Rerun telemetry: the explainer's readouts on simulated time, beside a drawing of the arm.
 
 rerun is imported only in recording/: blueprint.py names the channels and lays out the
-viewer, sinks.py opens the file and the viewers, readouts.py computes a batch's values,
-columns.py encodes them and writer.py sends them; this module holds the recorder that the
-node and `arm-sim run` drive.
+viewer, sinks.py opens the file and the viewers, properties.py stores the scene as data,
+readouts.py computes a batch's values, story.py the node's per tick, arm3d.py drives the
+URDF arm, columns.py encodes them and writer.py sends them on three timelines (sim_time,
+ros_time = the JointState stamps, log_time = wall clock); readback.py reads a recording
+back. This module holds the recorder that the node and `arm-sim run` drive.
 
 Recording must never slow or stop the physics: step_batch() takes a tick's states in one
 call (step() one step's) and appends them to one array of doubles; a batch of steps goes
 to a sender thread, which computes energies, torques and drawings with numpy and sends one
 send_columns per entity (rerun encodes the chunks on threads of its own). What is left on
 the simulation's side is the copy of the states and the sender's time holding the GIL;
-benchmarks/bench_telemetry.py measures both. A sink that fails (unwritable file, no viewer
-at the address, a viewer that dies) is one warning; the simulation runs on.
+benchmarks/bench_telemetry.py measures both. The steps waiting are kept as their states
+flattened into one array of doubles (8 bytes a number rather than ~40 as tuples of floats
+kept alive, and nothing left to convert while holding the GIL in the sender) and runs of
+consecutive steps under one held command: [first step, command (None without a command
+policy), steps]. A sink that fails (unwritable file, no viewer at the address, a viewer
+that dies) is one warning; the simulation runs on.
 """
 from __future__ import annotations
 
@@ -25,7 +31,9 @@ from itertools import chain
 import numpy as np
 import rerun as rr
 
+from .arm3d import arm3d_for
 from .blueprint import blueprint, styles
+from .properties import send_properties
 from .readouts import Snapshot
 from .sinks import open_sinks
 from .writer import BatchWriter
@@ -44,12 +52,9 @@ LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
 
 class RerunRecorder:
     """A recorder for cli.RUN_RECORDERS and the node: start / step or step_batch / flush /
-    event / finish.
-
-    start(sim) may be called again after a reset or for a new Simulator (step() also
-    notices a new one). Simulated time going back (a reset) continues the timeline from
-    where the last run ended, as the node's JointState stamps do, and the trace breaks.
-    """
+    event / finish. start(sim) may be called again after a reset or for a new Simulator
+    (step() also notices a new one). Simulated time going back (a reset) continues the
+    timeline from where the last run ended, as the node's JointState stamps do."""
 
     def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
                  warn=None):
@@ -64,26 +69,35 @@ class RerunRecorder:
         self.sim = None
         self._snapshot = None     # how the steps waiting read: sim's layout when they were taken
         self._dynamics = None     # sim.dynamics then (a payload grasped rebuilds it)
-        # Steps waiting to be sent: their states flattened into one array of doubles (8 bytes
-        # a number rather than ~40 as tuples of floats kept alive, and nothing left to convert
-        # while holding the GIL in the sender), and runs of consecutive steps under one held
-        # command: [first step, command (None without a command policy), steps].
-        self._states, self._runs, self._events = array("d"), [], []   # ...and text lines
+        # Steps waiting to be sent (see the module's docstring), and text lines.
+        self._states, self._runs, self._events = array("d"), [], []
         self._waiting = 0                       # steps in self._runs
+        # Wall clock marks [(steps waiting, time.time_ns())] at each look at the clock (log_time),
+        # the node's ticks [(row, as the link noted them: story.TickStory)].
+        self._walls, self._ticks = [], []
+        self.node = False         # a node's recording: its story per tick, ros_time its stamps
+        self.stamp_origin_ns = 0  # ros_time at sim_time 0 (arm-sim run: stamps are sim time)
+        self._described = None    # (scene, layout) the properties were sent for
         self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
         self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
         self._writer = BatchWriter(self.stream)   # the sender thread's: timeline and trace
         self._layout = None       # what the blueprint was drawn for: Snapshot.key
-        self._batches = queue.Queue(maxsize=QUEUED_BATCHES)
-        self._sender = None
+        self._sender = SenderThread(self._deliver)
 
     # -- protocol ---------------------------------------------------------------------
+
+    def for_node(self, stamp_origin_ns: int | None) -> None:
+        """Before start(): a node whose JointState stamps are stamp_origin_ns + sim_time
+        (None: unknown, no ros_time timeline)."""
+        self.node = True
+        self.stamp_origin_ns = self._writer.stamp_origin_ns = stamp_origin_ns
 
     def start(self, sim) -> None:
         """Begin (or, after a reset or for a new Simulator, continue) with sim's initial row."""
         self._bind(sim)
+        self._walls.append((self._waiting, time.time_ns()))
         self.event(f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
                    f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
                    f"{sim.scene.integrator}, E0 = {sim.initial_energy:.9g} J")
@@ -121,25 +135,27 @@ class RerunRecorder:
         Cheap to call once per tick (`sim` is accepted for that protocol; the rows already
         know theirs); step_batch() also calls it every CHECK_EVERY (LIVE_CHECK_EVERY) steps."""
         waiting = self._waiting
+        if waiting and (not self._walls or self._walls[-1][0] != waiting):
+            self._walls.append((waiting, time.time_ns()))   # log_time: rows in between interpolated
         due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + self._check_every, BATCH_STEPS)
-        if not (waiting or self._events) or not due:
+        if not (waiting or self._events or self._ticks) or not due:
             return
-        batch = (self._snapshot, self._runs, self._states, self._events)
+        batch = (self._snapshot, self._runs, self._states, self._events, self._ticks,
+                 self._walls)
         self._states, self._runs, self._events, self._waiting = array("d"), [], [], 0
+        self._ticks, self._walls = [], []
         self._check_at = min(self._check_every, BATCH_STEPS)
         self._last_send = time.monotonic()
-        if not self.enabled:
-            return
-        if self._sender is None:
-            self._sender = threading.Thread(target=self._send_batches, name="rerun-telemetry",
-                                            daemon=True)
-            self._sender.start()
-        if not self._sender.is_alive():   # never wait on a queue nobody empties
+        if self.enabled and not self._sender.put(batch):
             self._warn_once("send", "rerun: the telemetry sender stopped; running on without it")
             self.enabled = False
-            return
-        self._batches.put(batch)
+
+    def node_ticks(self, sim, ticks) -> None:
+        """The node's ticks just handed over: [(sim.steps at the tick's end, story values)]."""
+        if sim is self.sim:
+            self._ticks += [(self._waiting - 1 - (sim.steps - step), values)
+                            for step, values in ticks]
 
     def _on_sim_event(self, event) -> None:
         self.event(f"{event.kind}: {event.message}",
@@ -154,10 +170,7 @@ class RerunRecorder:
     def finish(self, sim=None) -> None:
         """Send what is buffered and close the sinks, so a file is complete and verifies."""
         self.flush(force=True)
-        if self._sender is not None:
-            self._batches.put(None)
-            self._sender.join()
-            self._sender = None
+        self._sender.close()
         if self.sim is not None and self._on_sim_event in self.sim.event_listeners:
             self.sim.event_listeners.remove(self._on_sim_event)
         if self.enabled:
@@ -188,33 +201,38 @@ class RerunRecorder:
     def _describe(self, sim, initial=None) -> None:
         """Open the sinks (first time) and log what does not change from step to step."""
         snap = self._snapshot = Snapshot(sim, initial)
+        snap.arm3d = arm3d_for(snap.arm)
         layout = snap.key
         if self._layout is None:
-            board = blueprint(snap, self.live)
+            board = blueprint(snap, self.live, self.node)
             if open_sinks(self.stream, board, self.sinks, self._warn_once, path=self.path,
                           spawn=self.spawn, connect=self.connect):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
         elif layout != self._layout and self.enabled:
-            rr.send_blueprint(blueprint(snap, self.live), recording=self.stream)
+            rr.send_blueprint(blueprint(snap, self.live, self.node), recording=self.stream)
         self._layout = layout
         if not self.enabled:
             return
-        for path, archetype in styles(snap):
-            self.stream.log(path, archetype, static=True)
+        for path, archetypes in styles(snap, self.node):
+            self.stream.log(path, *archetypes, static=True)
+        if self._described != (sim.scene, snap.key):   # the scene as data (a reset keeps it)
+            self._described = (sim.scene, snap.key)
+            send_properties(self.stream, snap, sim, self.stamp_origin_ns, self.node)
+            if snap.arm3d is not None:
+                snap.arm3d.log_static(self.stream, snap.arm, sim.scene.gravity, snap.drives)
 
     # -- sending ------------------------------------------------------------------------
 
-    def _send_batches(self) -> None:
-        """The sender thread: batches in the order flush() queued them, until finish()."""
-        while (batch := self._batches.get()) is not None:
-            if self.enabled:
-                with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
-                    self._guard(self._send, *batch)
+    def _deliver(self, batch) -> None:
+        """In the sender thread: each batch in the order flush() queued it."""
+        if self.enabled:
+            with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
+                self._guard(self._send, *batch)
 
-    def _send(self, snap, runs, states, events) -> None:
+    def _send(self, snap, runs, states, events, ticks, walls) -> None:
         """One batch, as flush() queued it."""
-        self._writer.send(snap, runs, states, events)
+        self._writer.send(snap, runs, states, events, ticks, walls)
 
     # -- failures -----------------------------------------------------------------------
 
@@ -231,6 +249,36 @@ class RerunRecorder:
         if key not in self._warned:
             self._warned.add(key)
             self._warn(message)
+
+
+class SenderThread:
+    """The thread that hands each batch flush() queues, in order, to `deliver`; started by
+    the first batch, stopped by close() once the queue is empty."""
+
+    def __init__(self, deliver):
+        self.deliver = deliver
+        self.queue = queue.Queue(maxsize=QUEUED_BATCHES)   # bounds memory: flush() waits
+        self.thread = None
+
+    def put(self, batch) -> bool:
+        """Queue a batch; False if the thread has died (never wait on a queue nobody empties)."""
+        if self.thread is None:
+            self.thread = threading.Thread(target=self._run, name="rerun-telemetry", daemon=True)
+            self.thread.start()
+        if not self.thread.is_alive():
+            return False
+        self.queue.put(batch)
+        return True
+
+    def close(self) -> None:
+        if self.thread is not None:
+            self.queue.put(None)
+            self.thread.join()
+            self.thread = None
+
+    def _run(self) -> None:
+        while (batch := self.queue.get()) is not None:
+            self.deliver(batch)
 
 
 def make_recorder(scene=None, path=None, spawn=False, connect=None, application_id="arm_sim",

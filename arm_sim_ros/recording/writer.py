@@ -1,17 +1,22 @@
 """A batch of recorded steps onto a Rerun stream: one send_columns per entity.
 
-The writer keeps what joins one batch to the next: where the timeline stands (simulated
-time running on across resets, as the node's JointState stamps do) and the last tip drawn
-(the trace joins consecutive frames, but not across a reset). It runs in the recorder's
-sender thread, one batch at a time.
+Every row is on three timelines: sim_time (simulated time running on across resets, as the
+node's JointState stamps do), ros_time (the stamp: stamp_origin_ns + sim_time; the offline
+run's origin is 0, as its bag's stamps are) and log_time (the wall clock when the recorder
+received the row, interpolated between its step_batch calls). The writer keeps what joins
+one batch to the next: where the timelines stand and the last tip drawn (the trace joins
+consecutive frames, but not across a reset). It runs in the recorder's sender thread, one
+batch at a time.
 """
 from __future__ import annotations
 
 import numpy as np
 import rerun as rr
 
-from .columns import nanoseconds, points, scalars, strips, time_column
+from .blueprint import NODE_SERIES
+from .columns import nanoseconds, points, scalars, strips, time_columns
 from .readouts import channel_values, drawing_points, unpack
+from .story import TickStory
 
 FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
 
@@ -26,23 +31,64 @@ class BatchWriter:
         self._offset = 0.0        # what resets add to steps x h on the timeline
         self._last_ns = 0         # timeline position of the last row sent
         self._last_tip = None
+        self._last_wall = None    # log_time of the last row sent, ns
+        self.stamp_origin_ns = 0  # ros_time at sim_time 0; None: no ros_time timeline
+        self._story = TickStory()  # the node's ticks: refused, late, real-time factor, sub-steps
 
-    def send(self, snap, runs, states, events) -> None:
-        """Runs of [first step, command, steps] with their flattened states, and text lines
-        (rows waiting before them, text, level), each at its row (the last one if none)."""
+    def send(self, snap, runs, states, events, ticks=(), walls=()) -> None:
+        """Runs of [first step, command, steps] with their flattened states, text lines
+        (rows waiting before them, text, level) and the node's ticks (row, values), each at
+        its row (the last one if none), and the wall clock marks of the batch."""
         n = sum(steps for _, _, steps in runs)
         if n:
-            self._send_rows(snap, *unpack(runs, states, n))
+            steps, states, commands = unpack(runs, states, n)
+            self._timeline(steps * snap.step_size)
+            self._wall_clock(n, walls)
+            self._send_rows(snap, steps, states, commands)
         if events:
-            at = [self._row_ns[min(i, n - 1)] if n else self._last_ns for i, _, _ in events]
-            self._send_columns("events", [time_column(np.array(at))], rr.TextLog.columns(
+            rows = [i for i, _, _ in events]
+            self._send_columns("events", self._index(rows, n), rr.TextLog.columns(
                 text=[text for _, text, _ in events], level=[level for _, _, level in events]))
+        if ticks:
+            index = self._index([max(i, 0) for i, _ in ticks], n)
+            values = self._story.values([v for _, v in ticks])
+            for k, path in enumerate(NODE_SERIES):
+                self._send_columns(path, index, scalars(values[:, k]))
+
+    def _index(self, rows, n):
+        """The time columns of rows of this batch (clipped to its last; none: the last sent)."""
+        if not n:
+            return self._columns([self._last_ns], [self._last_wall or 0])
+        at = np.minimum(rows, n - 1)
+        return self._columns(self._row_ns[at], self._row_wall[at])
+
+    def _columns(self, ns, wall):
+        origin = self.stamp_origin_ns
+        return time_columns(np.asarray(ns, "timedelta64[ns]"), np.asarray(wall, "int64"),
+                            None if origin is None else origin)
+
+    def _wall_clock(self, n, walls) -> None:
+        """Each row's log_time: the wall clock of the step_batch call that brought it, rows
+        in between interpolated (ns since the epoch)."""
+        if not walls:
+            self._row_wall = np.full(n, self._last_wall or 0, dtype=np.int64)
+            return
+        counts = np.array([c for c, _ in walls], float)
+        marks = np.array([w for _, w in walls], np.int64)
+        base = int(marks[0])
+        if counts[0] > 0:    # the batch starts where the last one ended (or at its first mark)
+            first = base if self._last_wall is None else self._last_wall
+            counts, marks = np.concatenate(([0.0], counts)), np.concatenate(([first], marks))
+        self._row_wall = base + np.rint(np.interp(
+            np.arange(1, n + 1), counts, (marks - base).astype(float))).astype(np.int64)
+        self._last_wall = int(self._row_wall[-1])
 
     def _send_rows(self, snap, steps, states, commands) -> None:
-        index = [time_column(self._timeline(steps * snap.step_size))]
-        for path, column in channel_values(snap, states, commands).items():
+        index = self._index(np.arange(len(steps)), len(steps))
+        values = channel_values(snap, states, commands)
+        for path, column in values.items():
             self._send_columns(path, index, scalars(column))
-        self._send_drawing(snap, steps, states[:, 0], states[:, 1])
+        self._send_drawing(snap, steps, states[:, 0], states[:, 1], values.get("joints/torque"))
 
     def _timeline(self, t):
         """Each row's position on the timeline in ns: t, plus the simulated time of every run
@@ -53,14 +99,14 @@ class BatchWriter:
         self._offset, self._last_raw = float(offsets[-1]), float(t[-1])
         self._row_ns = nanoseconds(t + offsets)
         self._last_ns = self._row_ns[-1]
-        return self._row_ns
 
-    def _send_drawing(self, snap, steps, q1, q2) -> None:
-        """Links, joints and the tip's trace every FRAME_PERIOD of simulated time."""
+    def _send_drawing(self, snap, steps, q1, q2, torque=None) -> None:
+        """Links, joints and the tip's trace every FRAME_PERIOD of simulated time; the 3D
+        arm's joints and torque arrows at the same frames."""
         frames = np.flatnonzero(steps % max(1, round(FRAME_PERIOD / snap.step_size)) == 0)
         if frames.size == 0:
             return
-        index = [time_column(self._row_ns[frames])]
+        index = self._index(frames, len(steps))
         elbow, tip = drawing_points(snap.arm, q1[frames], q2[frames])
         base = np.zeros_like(elbow)
         self._send_columns("arm/links", index, strips(
@@ -73,6 +119,9 @@ class BatchWriter:
         previous[restarted] = tip[restarted]
         self._send_columns("arm/tip_trace", index, strips(np.stack((previous, tip), 1)))
         self._last_tip = tip[-1]
+        if snap.arm3d is not None:
+            snap.arm3d.send(self.stream, index, q1[frames], q2[frames],
+                            None if torque is None else torque[frames])
 
     def _send_columns(self, path, index, columns) -> None:
         rr.send_columns(path, indexes=index, columns=columns, recording=self.stream)

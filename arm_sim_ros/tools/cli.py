@@ -25,6 +25,7 @@ from .signals import StopOnSignals
 # Modules that contribute subcommands of their own (each defines add_parser).
 SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
                       "arm_sim_ros.tools.batch",        # batch
+                      "arm_sim_ros.tools.inspect",      # inspect
                       "arm_sim_ros.tools.record",       # record
                       "arm_sim_ros.tools.send_torque"]  # send-torque
 
@@ -111,6 +112,9 @@ def cmd_run(args) -> int:
         try:
             drift = run_recorded(sim, duration, recorders, stop, progress)
         finally:
+            for recorder in recorders:          # the bag's last diagnostics name the signal
+                if stop.requested and hasattr(recorder, "stop_reason"):
+                    recorder.stop_reason = stop.requested
             finish_all(recorders, sim)
     result = sim.sample().as_dict() | {"max_abs_energy_drift": drift, "fault": sim.fault,
                                        "refused_steps": sim.refused_steps,

@@ -1,0 +1,64 @@
+"""`arm-sim inspect REC.rrd`: what a Rerun recording of this package holds, as text.
+
+First the recording's properties (the scene, integrator, effects, clock and units the
+recorder stored), one `# property.key = value` line each; then its scalar series as CSV on
+simulated time: sim_time [s], ros_time and log_time [ns since the epoch], then one column
+per series component, headed `entity:series name [unit]`. Cells a series has no value for
+(the node's per-tick story between ticks) are empty. `--every N` keeps every Nth row;
+`--properties` prints only the properties, `--no-properties` only the table.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+from ..usage import UsageError
+
+
+def _text(value) -> str:
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, list):
+        return json.dumps(value, ensure_ascii=False)
+    return str(value)
+
+
+def property_lines(props: dict) -> list[str]:
+    return [f"# {name}.{key} = {_text(value)}"
+            for name, values in props.items() for key, value in values.items()]
+
+
+def cmd_inspect(args) -> int:
+    from ..recording.readback import RecordingError, properties, table  # rerun: only here
+
+    path = Path(args.recording)
+    if not path.is_file():
+        raise UsageError(f"{args.recording}: no such file")
+    if args.every < 1:
+        raise UsageError(f"--every {args.every} must be at least 1")
+    try:
+        if not args.no_properties:
+            print("\n".join(property_lines(properties(path))))
+        if args.properties:
+            return 0
+        header, rows = table(path)
+    except RecordingError as error:
+        raise UsageError(str(error)) from None
+    out = csv.writer(sys.stdout, lineterminator="\n")
+    out.writerow(header)
+    for row in rows[::args.every]:
+        out.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("inspect", help="print a Rerun recording's properties and its "
+                                              "series as CSV")
+    p.add_argument("recording", metavar="REC.rrd", help="a recording written by arm-sim or the node")
+    p.add_argument("--every", type=int, default=1, metavar="N", help="keep every Nth row")
+    only = p.add_mutually_exclusive_group()
+    only.add_argument("--properties", action="store_true", help="print only the properties")
+    only.add_argument("--no-properties", action="store_true", help="print only the CSV table")
+    p.set_defaults(func=cmd_inspect)
