@@ -386,3 +386,35 @@ def test_record_refuses_before_joining_the_network(capsys, tmp_path):
         assert cli.main(argv) == 2
         assert reason in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
+
+
+def test_a_node_recording_and_an_arm_sim_record_bag_of_the_same_run_line_up(tmp_path):
+    """The node writes a Rerun recording while `arm-sim record` (its TopicRecorder) writes a
+    bag of the same run: every JointState in the bag is a row of the recording at the same
+    ros_time (its header stamp) with the same angles, so both open on one clock."""
+    sys.path.insert(0, os.path.dirname(__file__))
+    from test_telemetry import read_back
+    from arm_sim_ros.node.transports.dds import DdsArmSimNode
+
+    domain, rrd = 52, tmp_path / "node.rrd"
+    recorder = wire.make_participant(domain, ISOLATED)
+    finish = start_recording(tmp_path / "bag", {"/joint_states": NODE_TOPICS["/joint_states"]},
+                             recorder)
+    try:
+        node = DdsArmSimNode({"scene": "damped_release", "publish_rate": 50.0,
+                              "rerun_path": str(rrd)}, domain_id=domain, config=ISOLATED,
+                             wall_clock=lambda: 100.0, start_stamp_ns=1_700_000_000_123_000_000)
+        wait_matched([node.joint_state_writer])
+        for _ in range(30):
+            node.tick()
+        assert node.joint_state_writer.wait_for_acks(5_000_000_000)
+        node.close()
+    finally:
+        counts = finish()
+    assert counts == {"/joint_states": 30}
+    messages, _ = read_bag(tmp_path / "bag")
+    angles = read_back(rrd)["joints/angle"]
+    recorded = dict(zip(angles["ros_time"], angles["Scalars:scalars"]))
+    for _, message, _ in messages["/joint_states"]:
+        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+        assert recorded[stamp] == message.position.tolist()     # one clock, to the nanosecond
