@@ -12,12 +12,13 @@ from __future__ import annotations
 import time
 from math import isfinite
 
-from ..interface import ERROR, NODE_NAME, OK, WARN
+from ..interface import NODE_NAME
 from ..physics.simulator import Simulator
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
 from .parameters import SCENE_PARAMETERS, SPECS, NodeConfig
 from .recorder_link import RecorderLink, make_recorder
+from .status import health, status_line
 
 
 class ArmSimCore:
@@ -31,6 +32,7 @@ class ArmSimCore:
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
+        self.lockstep_states = []         # JointStates of lockstep ticks not yet published
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
@@ -105,6 +107,8 @@ class ArmSimCore:
             self.recorder.event(f"refused command: {reason}", "warn")
         elif command is not None:
             self._set_command(*command)
+            if self.config.values["lockstep"]:     # one tick per command, under that command
+                self.lockstep_states.append(self._tick())
         return reason
 
     def _set_command(self, tau1: float, tau2: float) -> None:
@@ -120,8 +124,19 @@ class ArmSimCore:
         self._event(f"payload {mass:g} kg: {'grasped' if mass else 'released'}; "
                     "the energy that changed hands is booked in payload_exchange")
 
-    def tick(self, wall_now: float | None = None) -> JointStateData:
-        """One timer tick: steps_per_tick RK4 steps, then the JointState to publish."""
+    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+        """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
+        lockstep, where each command ticks instead (lockstep_states holds their JointStates
+        until the transport publishes them)."""
+        if self.config.values["lockstep"]:
+            return None
+        return self._tick(wall_now)
+
+    def take_lockstep_states(self) -> list:
+        states, self.lockstep_states = self.lockstep_states, []
+        return states
+
+    def _tick(self, wall_now: float | None = None) -> JointStateData:
         self._note_lateness(self.wall_clock() if wall_now is None else wall_now)
         if not self.held:
             if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
@@ -194,12 +209,7 @@ class ArmSimCore:
         new_late = self.late_ticks - self._late_at_last_diag
         self._diag_wall, self._diag_time = wall_now, self.sim.time
         self._refused_at_last_diag, self._late_at_last_diag = self.refused_commands, self.late_ticks
-        if self.held:
-            level, message = ERROR, "integration not finite: holding the last finite state"
-        elif new_refused or new_late:
-            level, message = WARN, f"{new_refused} refused commands, {new_late} late ticks in the last interval"
-        else:
-            level, message = OK, "running"
+        level, message = health(self.held, new_refused, new_late)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
                                    {name: getattr(self, name) for name in COUNTERS})
@@ -208,6 +218,4 @@ class ArmSimCore:
 
     def status_line(self, rtf: float) -> str:
         """The one-line status the node prints each second."""
-        residual = "held" if self.held else f"{self.sim.residual():+.2e} J"
-        return (f"t = {self.sim.time:9.3f} s   real-time factor {rtf:6.2f}   energy residual "
-                f"{residual}   refused commands {self.refused_commands}")
+        return status_line(self.sim, self.held, rtf, self.refused_commands)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..interface import JOINT_NAMES
+from ..interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ..physics.model import ParameterError
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
@@ -82,7 +82,17 @@ PARAMETERS = (
     ParameterSpec("rerun_path", "str", "", "write a Rerun recording here (\"\" = off)"),
     ParameterSpec("rerun_spawn", "bool", False, "spawn a Rerun viewer"),
     ParameterSpec("rerun_connect", "str", "", "stream to a Rerun viewer at this address (\"\" = off)"),
+    ParameterSpec("joint_states_topic", "str", JOINT_STATES_TOPIC, "topic of the published "
+                  "sensor_msgs/JointState; chosen at start"),
+    ParameterSpec("joint_commands_topic", "str", JOINT_COMMANDS_TOPIC, "topic of "
+                  "sensor_msgs/JointState effort commands (ros2_control's topic-based "
+                  "hardware interface); chosen at start"),
+    ParameterSpec("publish_clock", "bool", True, "publish rosgraph_msgs/Clock on /clock every "
+                  "tick: simulated time, equal to the JointState stamps"),
+    ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
+                  "received, for deterministic controller tests"),
 )
+START_ONLY = ("scene", "joint_states_topic", "joint_commands_topic")   # fixed once running
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
 SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
@@ -136,9 +146,10 @@ class NodeConfig:
 
     def with_changes(self, changes: dict) -> "NodeConfig":
         """A new config with `changes` applied, or ParameterRefused with nothing changed."""
-        if "scene" in changes and changes["scene"] != self.values["scene"]:
-            raise ParameterRefused("scene", "the scene is chosen at start; restart the node "
-                                   "with -p scene:=NAME")
+        for name in START_ONLY:
+            if name in changes and changes[name] != self.values[name]:
+                raise ParameterRefused(name, f"{name} is chosen at start; restart the node "
+                                       f"with -p {name}:=VALUE")
         return _build(self.values | changes, load=lambda name: self.scene, changed=list(changes))
 
 

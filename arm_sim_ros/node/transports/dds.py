@@ -19,14 +19,15 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from .. import messages as msg
-from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_STATES_TOPIC, NODE_NAME,
-                          split_stamp)
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
+from .dds_clock import CLOCK_TOPIC, Clock, clock_message, clock_qos
 from .dds_services import DdsServices   # issue 15.3: parameter services, ~/reset
 
 CATCH_UP = 0.05   # wall seconds of lag made up by ticking back to back (scheduler jitter)
+LOCKSTEP_WAIT = 0.01   # wall seconds a lockstep node waits for a command before serving again
 
 
 def resolve_name(name: str, namespace: str = "/", remap: dict | None = None) -> str:
@@ -64,20 +65,29 @@ class DdsArmSimNode:
         self.wall_clock = wall_clock
         self.participant = msg.make_participant(domain_id, config)
         topic = lambda ros_name: msg.ros_topic(resolve_name(ros_name, namespace, remap))  # noqa: E731
-        self.joint_state_writer = self._writer(topic(JOINT_STATES_TOPIC), msg.JointState)
+        values = node_config.values
+        self.joint_state_writer = self._writer(topic(values["joint_states_topic"]), msg.JointState)
         self.diagnostics_writer = self._writer(topic(DIAGNOSTICS_TOPIC), msg.DiagnosticArray)
-        self.command_reader = DataReader(
-            self.participant, Topic(self.participant, topic(COMMAND_TOPIC), msg.Float64MultiArray),
-            qos=msg.default_qos(msg.Float64MultiArray))
+        self.clock_writer = DataWriter(self.participant,
+                                       Topic(self.participant, topic(CLOCK_TOPIC), Clock),
+                                       qos=clock_qos())
+        self.command_reader = self._reader(topic(COMMAND_TOPIC), msg.Float64MultiArray)
+        self.joint_command_reader = self._reader(topic(values["joint_commands_topic"]),
+                                                 msg.JointState)
         self._command_ready = WaitSet(self.participant)
-        self._command_ready.attach(ReadCondition(
-            self.command_reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+        for reader in (self.command_reader, self.joint_command_reader):
+            self._command_ready.attach(ReadCondition(
+                reader, SampleState.Any | ViewState.Any | InstanceState.Any))
         # --- issue 15.3: rcl_interfaces parameter services, ~/reset, /parameter_events ---
         self.services = DdsServices(self.participant, name, namespace, self.log)
         # --- end issue 15.3 ---
         self._announce()
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
         self.services.attach(self.core)   # issue 15.3
+
+    def _reader(self, topic_name: str, message_type) -> DataReader:
+        return DataReader(self.participant, Topic(self.participant, topic_name, message_type),
+                          qos=msg.default_qos(message_type))
 
     def _writer(self, topic_name: str, message_type) -> DataWriter:
         return DataWriter(self.participant, Topic(self.participant, topic_name, message_type),
@@ -92,9 +102,10 @@ class DdsArmSimNode:
             qos=msg.discovery_info_qos())
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
-            reader_gid_seq=[msg.gid(self.command_reader)]
+            reader_gid_seq=[msg.gid(self.command_reader), msg.gid(self.joint_command_reader)]
             + [msg.gid(r) for r in self.services.readers],   # issue 15.3: service requests
-            writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer)]
+            writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer),
+                            msg.gid(self.clock_writer)]
             + [msg.gid(w) for w in self.services.writers])   # issue 15.3: replies, events
         self.discovery_writer.write(msg.ParticipantEntitiesInfo(
             gid=msg.gid(self.participant), node_entities_info_seq=[node]))
@@ -111,15 +122,29 @@ class DdsArmSimNode:
             if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
                 self.core.on_command(sample.data)
                 count += 1
+        for sample in self.joint_command_reader.take(N=256):
+            if isinstance(sample, msg.JointState):
+                self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
+                                                 sample.effort)
+                count += 1
+        for data in self.core.take_lockstep_states():   # lockstep: a tick per command
+            self._publish(data)
         return count
 
-    def tick(self, wall_now: float | None = None) -> JointStateData:
-        """The timer callback: take commands, step, publish joint_states."""
+    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+        """The timer callback: take commands, step, publish joint_states (and /clock); in
+        lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
         self.services.poll()   # issue 15.3: answer service requests between ticks
         data = self.core.tick(wall_now)
-        self.joint_state_writer.write(to_joint_state(data))
+        if data is not None:
+            self._publish(data)
         return data
+
+    def _publish(self, data: JointStateData) -> None:
+        self.joint_state_writer.write(to_joint_state(data))
+        if self.core.config.values["publish_clock"]:
+            self.clock_writer.write(clock_message(data.stamp_ns))
 
     def publish_diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         data = self.core.diagnostics(wall_now)
@@ -142,6 +167,14 @@ class DdsArmSimNode:
         done = 0
         while ticks is None or done < ticks:
             now = self.wall_clock()
+            if self.core.config.values["lockstep"]:    # commands tick: wait for them
+                self.services.poll()
+                self.take_commands(timeout=LOCKSTEP_WAIT)
+                done = round(self.core.sim.time / config.tick_period)
+                if now >= next_status:
+                    self._status(now, on_status)
+                    next_status = now + 1.0
+                continue
             if period > 0 and now < next_tick:
                 self.services.serve_for(next_tick - now)   # issue 15.3: sleep, serving
                 now = self.wall_clock()
@@ -168,4 +201,5 @@ class DdsArmSimNode:
         self.core.finish()
         self.services.close()   # issue 15.3
         self._command_ready = self.command_reader = self.discovery_writer = None
+        self.joint_command_reader = self.clock_writer = None
         self.joint_state_writer = self.diagnostics_writer = self.participant = None

@@ -14,12 +14,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, JOINT_COMMANDS_TOPIC,
-                          JOINT_STATES_TOPIC, NODE_NAME, split_stamp)
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import PARAMETERS, SPECS, ParameterRefused, resolve_parameters, scene_defaults
@@ -68,27 +68,42 @@ class ArmSimNode(Node):
                                self.get_clock().now().nanoseconds, recorder)
         self.add_on_set_parameters_callback(self.on_set_parameters)
 
-        self.joint_state_publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, 10)
+        values = config.values
+        self.joint_state_publisher = self.create_publisher(
+            JointState, values["joint_states_topic"], 10)
+        self.clock_publisher = self.create_publisher(Clock, "/clock", 10)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.command_subscription = self.create_subscription(
             Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
         self.joint_command_subscription = self.create_subscription(
-            JointState, JOINT_COMMANDS_TOPIC, self.on_joint_command, 10)
+            JointState, values["joint_commands_topic"], self.on_joint_command, 10)
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
         self.tick_timer = self.create_timer(config.wall_period, self.on_tick)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
+        self._publish_lockstep()
 
     def on_joint_command(self, message: JointState) -> None:
         self.core.on_joint_state_command(list(message.name), list(message.position),
                                          list(message.velocity), list(message.effort))
+        self._publish_lockstep()
 
-    def on_tick(self) -> JointStateData:
+    def _publish_lockstep(self) -> None:
+        for data in self.core.take_lockstep_states():   # lockstep: a tick per command
+            self._publish(data)
+
+    def on_tick(self) -> JointStateData | None:
         data = self.core.tick()
-        self.joint_state_publisher.publish(to_joint_state(data))
+        if data is not None:
+            self._publish(data)
         return data
+
+    def _publish(self, data: JointStateData) -> None:
+        self.joint_state_publisher.publish(to_joint_state(data))
+        if self.core.config.values["publish_clock"]:
+            self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
 
     def on_diagnostics(self) -> DiagnosticData:
         rtf = self.core.real_time_factor(self.core.wall_clock())

@@ -1,0 +1,105 @@
+"""The arm in a ROS 2 graph on the dds transport: JointState effort commands on
+joint_commands (ros2_control's topic-based hardware interface), /clock with the stamps of
+joint_states, lockstep (one tick per command), topics chosen by parameters. Loopback,
+domains 140-149."""
+import time
+
+import pytest
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from rosbags.typesys import Stores, get_typestore
+
+from arm_sim_ros.node import messages as msg
+from arm_sim_ros.node.parameters import ParameterRefused
+from arm_sim_ros.node.transports.dds_clock import CLOCK_TYPE_HASH, Clock, clock_qos
+from arm_sim_ros.node.transports.dds import DdsArmSimNode
+from test_node_dds import CONFIG, TIMEOUT, Peer, start
+
+
+def reader(peer, topic, message_type, qos=None):
+    p = peer.participant
+    return DataReader(p, Topic(p, topic, message_type),
+                      qos=qos or msg.default_qos(message_type, depth=1000))
+
+
+def joint_command_writer(peer, topic="rt/joint_commands"):
+    p = peer.participant
+    writer = DataWriter(p, Topic(p, topic, msg.JointState), qos=msg.default_qos(msg.JointState))
+    deadline = time.monotonic() + TIMEOUT
+    while not msg.matched(writer):
+        assert time.monotonic() < deadline, "joint_commands not matched"
+        time.sleep(0.001)
+    return writer
+
+
+def effort_command(names, effort):
+    return msg.JointState(name=list(names), effort=list(effort))
+
+
+def stamp(m):
+    return m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+
+
+def test_the_clock_type_hash_is_rosidls():
+    assert get_typestore(Stores.ROS2_JAZZY).hash_rihs01("rosgraph_msgs/msg/Clock") == CLOCK_TYPE_HASH
+
+
+def test_clock_is_published_every_tick_with_the_joint_state_stamp():
+    node, peer = start(140, publish_rate=100.0)
+    clock = reader(peer, "rt/clock", Clock, qos=clock_qos())
+    time.sleep(0.05)                                # discovery of the clock reader
+    for _ in range(5):
+        node.tick()
+    states = peer.read(peer.joint_states, 5, msg.JointState)
+    clocks = peer.read(clock, 5, Clock)
+    assert [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks] == [stamp(m) for m in states]
+
+
+def test_publish_clock_false_publishes_no_clock():
+    node, peer = start(141, publish_clock=False)
+    clock = reader(peer, "rt/clock", Clock, qos=clock_qos())
+    time.sleep(0.05)
+    node.tick()
+    peer.read(peer.joint_states, 1, msg.JointState)
+    time.sleep(0.05)
+    assert [s for s in clock.take(N=10) if isinstance(s, Clock)] == []
+
+
+def test_joint_state_effort_commands_drive_the_arm_by_joint_name():
+    node, peer = start(142, policy="command", gravity=0.0)
+    writer = joint_command_writer(peer)
+    writer.write(effort_command(["elbow_joint", "shoulder_joint"], [0.25, 1.0]))
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    assert node.core.command == (1.0, 0.25)
+    writer.write(msg.JointState(name=["shoulder_joint"], position=[0.3]))   # not torque
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    assert node.core.refused_commands == 1 and node.core.command == (1.0, 0.25)
+
+
+def test_lockstep_ticks_once_per_command_and_never_on_its_own():
+    node, peer = start(143, policy="command", lockstep=True, publish_rate=100.0)
+    assert node.tick() is None and node.core.sim.steps == 0        # the timer does not step
+    for k in range(3):
+        peer.commands.write(msg.Float64MultiArray(data=[0.5 * k, 0.0]))
+    deadline, taken = time.monotonic() + TIMEOUT, 0
+    while taken < 3 and time.monotonic() < deadline:
+        taken += node.take_commands(timeout=0.1)
+    states = peer.read(peer.joint_states, 3, msg.JointState)
+    assert node.core.sim.time == pytest.approx(0.03)               # three ticks, no more
+    assert [stamp(m) for m in states] == [5_000_000_000 + 10_000_000 * (k + 1) for k in range(3)]
+
+
+def test_topics_are_parameters_chosen_at_start():
+    node = DdsArmSimNode({"joint_states_topic": "robot_joint_states",
+                          "joint_commands_topic": "robot_joint_command"}, domain_id=144,
+                         config=CONFIG, wall_clock=lambda: 0.0, start_stamp_ns=0)
+    peer = Peer(144)
+    states = reader(peer, "rt/robot_joint_states", msg.JointState)
+    writer = joint_command_writer(peer, "rt/robot_joint_command")
+    writer.write(effort_command(["shoulder_joint", "elbow_joint"], [1.0, 0.0]))
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    node.tick()
+    assert len(peer.read(states, 1, msg.JointState)) == 1
+    with pytest.raises(ParameterRefused, match="chosen at start"):
+        node.core.set_parameters({"joint_states_topic": "other"})
