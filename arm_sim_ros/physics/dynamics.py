@@ -9,6 +9,7 @@ straight-line code, because a function call per term would cost more than the ph
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from math import cos, sin
 
@@ -111,11 +112,17 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
 def body(effects, mode=None) -> list[str]:
     """The rigid body, the effects' stage terms, then their forces, inputs first; switching
     effects in `mode` (None: their mode-free form)."""
-    lines = RIGID_BODY + ["    " + line for effect in effects for line in effect.terms()]
+    lines = RIGID_BODY + stage_terms(effects, mode)
     for effect in sorted(effects, key=lambda e: not e.drives):
         forces = effect.mode_forces(mode) if mode is not None else effect.forces()
         lines += ["    " + line for line in forces]
     return lines
+
+
+def stage_terms(effects, mode=None) -> list[str]:
+    """The effects' stage lines (a switching clamp's in `mode`; None: the mode-free form)."""
+    return ["    " + line for effect in effects
+            for line in (effect.mode_terms(mode) if mode is not None else effect.terms())]
 
 
 def merged_channels(effects) -> list[Channel]:
@@ -130,10 +137,11 @@ def merged_channels(effects) -> list[Channel]:
     return list(merged.values())
 
 
-def mode_functions(dynamics: Dynamics, mode, guards):
-    """(rhs, probe, guard) of `mode`: rhs as Dynamics.function, with the fixed joints'
-    accelerations exactly 0; probe(q1, q2, u1, u2, *extra) -> (lam1, lam2, *guards), the
-    holding torques and the switching functions (expressions) there; guard -> the latter."""
+def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
+    """(rhs, probe, guard, requests) of `mode`: rhs as Dynamics.function, with the fixed
+    joints' accelerations exactly 0; probe(q1, q2, u1, u2, *extra) -> (lam1, lam2, *guards),
+    the holding torques and the switching functions (expressions) there; guard -> the
+    latter; requests -> the expressions `requests` (the clamps' requests; None without)."""
     fixed = tuple(code in FIXED for code in mode[:2])
     signature = ", ".join(["q1", "q2", "u1", "u2"] + list(dynamics.extra))
     lines = body(dynamics.active, mode) + CONSTRAINED_SOLVE[fixed]
@@ -143,13 +151,23 @@ def mode_functions(dynamics: Dynamics, mode, guards):
                        + ["    return " + ", ".join(["a1", "a2"] + rates + channels)]
                        + [f"def probe({signature}):"] + lines
                        + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
-    if not any("lam" in g for g in guards):      # the switching functions alone: cheap
-        source += f"def guard({signature}):\n    return ({', '.join(guards)},)\n"
-    else:
+    terms = stage_terms(dynamics.active, mode)
+    values = f"({', '.join(guards)},)" if guards else "()"
+    assigned = set(re.findall(r"(\w+)\s*=(?!=)", "\n".join(terms)))
+    used = set(re.findall(r"[A-Za-z_]\w*", " ".join(guards)))
+    if any("lam" in g for g in guards):          # the holding torques: the whole solve
         source += f"def guard({signature}):\n    return probe({signature})[2:]\n"
+    elif used & assigned:                        # a clamp's request: the stage terms alone
+        source += "\n".join([f"def guard({signature}):"] + terms
+                             + [f"    return {values}"]) + "\n"
+    else:                                        # the switching functions alone: cheap
+        source += f"def guard({signature}):\n    return {values}\n"
+    if requests:
+        source += "\n".join([f"def requests({signature}):"] + terms
+                             + [f"    return ({', '.join(requests)},)"]) + "\n"
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
-    return namespace["rhs"], namespace["probe"], namespace["guard"]
+    return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 
 
 def build_dynamics(scene, command=None) -> Dynamics:

@@ -1,9 +1,11 @@
-"""Non-smooth effects (friction, joint limits) switched at events located inside the step.
+"""Non-smooth effects (friction, joint limits, clamps) switched at events located inside
+the step.
 
 Each joint has a mode (dynamics.mode_functions): a code, "+"/"-" sliding with friction,
 "stuck", "lower"/"upper" resting on a hard limit (those three fix the joint: a constraint
 whose holding torque lamᵢ comes out of the solve), "free"; and a zone, 1/-1 beyond a
-compliant limit, else 0. Within a mode the right-hand side is smooth, so RK4 keeps its
+compliant limit, else 0; with clamps of a state-dependent request (clamps.py) a fifth
+entry, their modes. Within a mode the right-hand side is smooth, so RK4 keeps its
 order; the effects' switching functions g (Effect.guards) say when a mode ends (g < 0).
 
 A step is taken as before (the stability plan's equal sub-steps; more while a compliant
@@ -21,6 +23,8 @@ from collections import Counter
 from math import ceil
 
 from . import model, stability
+from .clamps import KINDS as CLAMPS
+from .clamps import Clamps
 from .dynamics import FIXED, mode_functions
 from .effects import Effect
 
@@ -73,9 +77,9 @@ class Switching:
             ratio, _, _ = stability.bound(tableau, list(dynamics.active)
                                           + [Engaged(self.limits, self.arm)], self.arm, 1.0)
             self.engaged_rate = ratio
+        self.clamps = Clamps.of(dynamics)  # effort, voltage clamps of a state-dependent request
         self.locate = True                # False: switch at sub-step ends (first order)
-        self._functions = {}
-        self.mode, self._last = None, None
+        self._functions, self.mode, self._last = {}, None, None
 
     def reset(self) -> Counter:
         """Forget the mode (found again from the next state) and the counts, which are
@@ -87,12 +91,18 @@ class Switching:
     # --- modes ---------------------------------------------------------------------------
 
     def functions(self, mode):
-        """(rhs, probe, guard kinds) of a mode, compiled once."""
+        """(rhs, probe, guard, guard kinds, the clamps' requests) of a mode, compiled once."""
         if mode not in self._functions:
             guards = [g for e in self.dynamics.active if e.switching for g in e.guards(mode)]
-            rhs, probe, guard = mode_functions(self.dynamics, mode, [g[0] for g in guards])
-            self._functions[mode] = rhs, probe, guard, [g[1:] for g in guards]
+            rhs, probe, guard, requests = mode_functions(
+                self.dynamics, mode, [g[0] for g in guards], self.clamps and self.clamps.requests)
+            self._functions[mode] = rhs, probe, guard, [g[1:] for g in guards], requests
         return self._functions[mode]
+
+    def clamped(self, y, mode) -> tuple:
+        """`mode` with the clamps' modes the state y calls for (itself without clamps)."""
+        return mode if self.clamps is None else self.clamps.found(
+            y[:self.width], mode, lambda m: self.functions(m)[4])
 
     def initial_mode(self, y) -> tuple:
         codes, zones = [], [0, 0]
@@ -107,7 +117,7 @@ class Switching:
             elif self.limits is not None and not self.hard:
                 zones[i] = 1 if q > self.limits.upper[i] else -1 if q < self.limits.lower[i] else 0
             codes.append(code)
-        return (*codes, *zones)
+        return self.clamps.initial((*codes, *zones)) if self.clamps else (*codes, *zones)
 
     def settle(self, y, mode) -> tuple:
         """The mode with every fixed joint's holding torque admissible: within ±Fsᵢ when
@@ -149,8 +159,10 @@ class Switching:
         """step(f, y, h) with every switch inside the step located and applied (f unused:
         each mode has its own right-hand side)."""
         if y is not self._last:                  # reset, or a state set from outside
-            self.mode = self.settle(y, self.initial_mode(y))
-        rhs, _, guard, kinds = self.functions(self.mode)
+            self.mode = self.settle(y, self.clamped(y, self.initial_mode(y)))
+        elif self.clamps is not None and self.clamps.stale():   # a new command
+            self.mode = self.settle(y, self.clamped(y, self.mode))
+        rhs, _, guard, kinds, _ = self.functions(self.mode)
         if self.substeps == 1 and not (self.mode[2] or self.mode[3]):   # the common case
             y1 = self.step(rhs, y, h)
             if not kinds or min(guard(*y1[:self.width])) >= 0.0:
@@ -159,7 +171,7 @@ class Switching:
         remaining, events = h, 0
         while remaining > 1e-15 * h:
             mode = self.mode
-            rhs, _, guard, kinds = self.functions(mode)
+            rhs, _, guard, kinds, _ = self.functions(mode)
             cap = h / self.substeps_for(h, bool(mode[2] or mode[3]))
             count = max(1, ceil(remaining / cap - 1e-9))
             dt = remaining / count
@@ -172,7 +184,8 @@ class Switching:
                 if self.locate and events < MAX_EVENTS_PER_STEP:
                     t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed)
                 else:
-                    t, y = dt, self.apply(y1, self.fired(guard, kinds, y1), False, elapsed + dt)
+                    t, y = dt, self.apply(y1, fired(guard, kinds, y1[:self.width]), False,
+                                          elapsed + dt)
                 events += 1
                 remaining -= k * dt + t
                 break
@@ -180,11 +193,6 @@ class Switching:
                 remaining = 0.0
         self._last = y = tuple(y)
         return y
-
-    def fired(self, guard, kinds, y) -> list:
-        values = guard(*y[:self.width])
-        order = sorted(range(len(values)), key=values.__getitem__)
-        return [kinds[n] for n in order if values[n] < 0.0]
 
     def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed):
         """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
@@ -210,10 +218,10 @@ class Switching:
             else:
                 a, ga, ya = t, gt, yt
                 gb, side = (0.5 * gb, side + 1) if side > 0 else (gb, 1)
-        fired = self.fired(guard, kinds, yb)
-        if fired and fired[0][0] == "impact":         # arrive, not pass: the state before
-            return a, self.apply(ya, fired[:1], at=elapsed + b)
-        return b, self.apply(yb, fired, at=elapsed + b)
+        switches = fired(guard, kinds, yb[:self.width])
+        if switches and switches[0][0] == "impact":   # arrive, not pass: the state before
+            return a, self.apply(ya, switches[:1], at=elapsed + b)
+        return b, self.apply(yb, switches, at=elapsed + b)
 
     # --- switches ------------------------------------------------------------------------
 
@@ -232,12 +240,14 @@ class Switching:
                 mode[2 + i] = 0
             elif kind == "impact":
                 impulse(self, y, mode, i, located)
-        self.mode = self.settle(y, tuple(mode))
+        self.mode = self.settle(y, self.clamped(y, tuple(mode)))   # clamps: found from y
         for kind, i in fired[:1]:
             if kind == "stop":
                 kind = "stick" if self.mode[i] == "stuck" else "reverse"
             elif kind == "impact":
                 kind = "rest" if self.mode[i] in ("lower", "upper") else "impact"
+            elif kind in CLAMPS:
+                kind = self.clamps.kind(kind, i, self.mode)
             self.count(kind, i, at)
         return y
 
@@ -250,6 +260,13 @@ class Switching:
         elif total >= 10 and str(total).rstrip("0") == "1":     # 10, 100, 1000 ...
             counts = ", ".join(f"{k} {n}" for k, n in sorted(self.counts.items()))
             self.emit("switch", f"{total} switches so far ({counts}); latest at t = {when}")
+
+
+def fired(guard, kinds, y) -> list:
+    """The switches whose functions went negative at y (q, q̇, extra), most negative first."""
+    values = guard(*y)
+    order = sorted(range(len(values)), key=values.__getitem__)
+    return [kinds[n] for n in order if values[n] < 0.0]
 
 
 def impulse(stepper, y, mode, i, located) -> None:

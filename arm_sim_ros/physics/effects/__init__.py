@@ -46,12 +46,17 @@ def scene_effects(scene, command=None) -> list[Effect]:
                                 **scene.controller_model)
                 if scene.controller_model is not None else None)
     actuator = _actuator(scene, arm, believed, command, windings)
+    # A request that depends on the state (compensation) crosses its clamps inside a step:
+    # they switch as located events then; else the clamp is constant within the step.
+    located = actuator is not None and actuator.compensates
     if actuator is not None:
         if believed is not None and actuator.compensates:
             effects.append(believed)
         effects.append(actuator)
         if scene.effort_limits is not None:
-            effects.append(EffortLimits(scene.effort_limits))
+            effects.append(EffortLimits(scene.effort_limits, switching=located))
+    if windings and motors.voltage_limit is not None:
+        motors.switching = located
     if motors is not None:
         effects.append(motors)       # armature only: no code; windings: the driver and currents
     if scene.springs is not None:

@@ -81,6 +81,21 @@ def validate(effect: str, parameters, mapping) -> dict:
     return values
 
 
+def clamp_lines(request: str, target: str, limit: str, clamp: int) -> list[str]:
+    """`target` = `request` (clamp 0) or ±`limit` (clamp 1/-1)."""
+    return [f"{target} = {request if not clamp else ('' if clamp > 0 else '-') + limit}"]
+
+
+def clamp_guards(request: str, limit: str, clamp: int, kind: str, joint: int) -> list:
+    """(g, kind, joint): the clamp's mode holds while g >= 0 (passing: within ±limit;
+    holding +limit: request >= limit; holding -limit: request <= -limit)."""
+    if clamp == 0:
+        return [(f"{limit} - {request}", kind, joint), (f"{request} + {limit}", kind, joint)]
+    if clamp > 0:
+        return [(f"{request} - {limit}", kind, joint)]
+    return [(f"-{limit} - {request}", kind, joint)]
+
+
 @dataclass(frozen=True)
 class Channel:
     """An energy flow integrated at the same RK stages as the state.
@@ -114,6 +129,11 @@ class Effect:
         """Lines adding this effect's generalized force to f1, f2."""
         return []
 
+    def mode_terms(self, mode) -> list[str]:
+        """A switching clamp's stage lines in `mode`, whose fifth entry holds the clamps'
+        modes (effort 1, effort 2, voltage 1, voltage 2: 0 passes, 1/-1 holds +/-limit)."""
+        return self.terms()
+
     def mode_forces(self, mode) -> list[str]:
         """A switching effect's force lines in `mode` = (code1, code2, zone1, zone2), smooth
         within it: code "+"/"-" sliding, "stuck", "lower"/"upper" resting on a hard limit
@@ -122,7 +142,8 @@ class Effect:
 
     def guards(self, mode) -> list[tuple[str, str, int]]:
         """Switching functions (expression, event kind, joint): `mode` holds while each
-        expression (of q1, q2, u1, u2 and the holding torques lam1, lam2) is >= 0."""
+        expression (of q1, q2, u1, u2, the holding torques lam1, lam2 and the names the
+        stage terms assign, such as a clamp's request) is >= 0."""
         return []
 
     def channels(self) -> tuple[Channel, ...]:

@@ -9,14 +9,17 @@ optional `voltage_limit`, the winding currents i₁, i₂ join the state (initia
 driver turns the requested joint torque τₐ into Vᵢ = clamp(Rᵢ τₐᵢ / (Nᵢ kᵢ), ±Vlimᵢ), the
 winding obeys Lᵢ diᵢ/dt = Vᵢ − Rᵢ iᵢ − kᵢ Nᵢ q̇ᵢ and the joint receives Nᵢ kᵢ iᵢ. The stored
 ½ Lᵢ iᵢ² counts in E; `electrical_input` = ∫Σ Vᵢ iᵢ dt and `copper_loss` = ∫Σ Rᵢ iᵢ² dt.
+When the request depends on the state the voltage clamp is switched like the effort clamp
+(effort_limits.py): modes 0 (passes `va`) and ±1 (holds ±Vlimᵢ), located inside the step.
 """
 from __future__ import annotations
 
 from ..model import ParameterError
 from ..stability import worst_stiffness
-from .base import Channel, Effect, Parameter
+from .base import Channel, Effect, Parameter, clamp_guards, clamp_lines
 
 ELECTRICAL = ("resistance", "inductance", "torque_constant")
+VOLTAGE = 2                # where the voltage clamps' modes sit in the clamp modes
 
 
 class Motors(Effect):
@@ -53,6 +56,7 @@ class Motors(Effect):
         self.resistance, self.inductance = resistance, inductance
         self.torque_constant, self.voltage_limit = torque_constant, voltage_limit
         self.state = ("i1", "i2") if self.windings else ()
+        self.switching = False       # set by scene_effects: a clamp located as an event
 
     @property
     def armature(self) -> tuple[float, float]:
@@ -85,6 +89,22 @@ class Motors(Effect):
                       f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
                       f"t{j} = KN{j} * i{j}"]
         return lines
+
+    def mode_terms(self, mode) -> list[str]:
+        if not self.switching:
+            return self.terms()
+        lines = []
+        for i in (0, 1):
+            j = i + 1
+            lines += [f"va{j} = DRIVE{j} * t{j}",
+                      *clamp_lines(f"va{j}", f"v{j}", f"VLIM{j}", mode[4][VOLTAGE + i]),
+                      f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
+                      f"t{j} = KN{j} * i{j}"]
+        return lines
+
+    def guards(self, mode) -> list[tuple[str, str, int]]:
+        return [g for i in (0, 1) for g in
+                clamp_guards(f"va{i + 1}", f"VLIM{i + 1}", mode[4][VOLTAGE + i], "voltage", i)]
 
     def rates(self) -> list[str]:
         return ["di1", "di2"] if self.windings else []
