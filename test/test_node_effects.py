@@ -110,3 +110,13 @@ def test_a_joint_state_command_that_is_not_a_torque_command_is_refused_and_count
     core = make_core(scene="release", policy="command")
     assert reason in core.on_joint_state_command(names, position, velocity, effort)
     assert core.refused_commands == 1 and core.command == (0.0, 0.0)
+
+
+def test_switches_inside_steps_are_counted_in_the_diagnostics():
+    core = make_core(scene="stick_slip", publish_rate=10.0)
+    for _ in range(30):
+        core.tick(0.0)
+    values = dict(core.diagnostics(0.0).values)
+    counted = dict(item.split("=") for item in values["switch_events"].split())
+    assert counted == {k: str(n) for k, n in core.sim.switch_events.items()} and counted
+    assert dict(make_core(scene="release").diagnostics(0.0).values)["switch_events"] == "0"

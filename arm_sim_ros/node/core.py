@@ -64,7 +64,9 @@ class ArmSimCore:
     def _on_sim_event(self, event) -> None:
         """What the simulator does later (a driver saturating...) reaches the log as it
         happens; a fault is logged where the tick holds (_advance)."""
-        if event.kind != "fault":
+        if event.kind == "switch":           # stick, slip, impact...: the physics, not a fault
+            self.log.info(f"{event.message} (at t = {event.t:.6f} s)")
+        elif event.kind != "fault":
             self.warnings.warning(event.kind, f"{event.message} (at t = {event.t:.6f} s)")
 
     def set_parameters(self, changes: dict) -> list:
