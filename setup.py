@@ -22,6 +22,7 @@ setup(
         share("config/scenes", "*.yaml"),
         share("launch", "*.launch.py"),
         share("urdf", "*.urdf"),
+        share("urdf", "*.xml"),
     ],
     python_requires=">=3.10",
     # Pinned: what CI and the README install. On a ROS machine rosdep supplies numpy/yaml.
