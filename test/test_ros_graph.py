@@ -103,3 +103,27 @@ def test_topics_are_parameters_chosen_at_start():
     assert len(peer.read(states, 1, msg.JointState)) == 1
     with pytest.raises(ParameterRefused, match="chosen at start"):
         node.core.set_parameters({"joint_states_topic": "other"})
+
+
+def test_a_second_node_with_the_same_name_is_warned_about(caplog):
+    import logging
+    first = DdsArmSimNode({}, domain_id=145, config=CONFIG, wall_clock=lambda: 0.0,
+                          start_stamp_ns=0, log=logging.getLogger("first"))
+    with caplog.at_level(logging.WARNING):
+        time.sleep(0.1)
+        first.name_watch.check()                          # alone: its own entry is not a twin
+    assert not [r for r in caplog.records if "another node" in r.message]
+    second = DdsArmSimNode({}, domain_id=145, config=CONFIG, wall_clock=lambda: 0.0,
+                           start_stamp_ns=0, log=logging.getLogger("second"))
+    with caplog.at_level(logging.WARNING):
+        deadline = time.monotonic() + TIMEOUT
+        while len({r.name for r in caplog.records if "another node named /arm_sim" in r.message}) < 2:
+            assert time.monotonic() < deadline, "the twin was not noticed"
+            first.name_watch.check()
+            second.name_watch.check()
+            time.sleep(0.01)
+        warned = len(caplog.records)
+        first.name_watch.check()
+        assert len(caplog.records) == warned               # once per twin, not every second
+    first.close()
+    second.close()

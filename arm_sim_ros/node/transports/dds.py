@@ -23,6 +23,7 @@ from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stam
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
+from .dds_graph import NameWatch
 from .dds_clock import CLOCK_TOPIC, Clock, clock_message, clock_qos
 from .dds_services import DdsServices   # issue 15.3: parameter services, ~/reset
 
@@ -82,6 +83,7 @@ class DdsArmSimNode:
         self.services = DdsServices(self.participant, name, namespace, self.log)
         # --- end issue 15.3 ---
         self._announce()
+        self.name_watch = NameWatch(self.participant, namespace, name, self.log)
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
         self.services.attach(self.core)   # issue 15.3
 
@@ -190,6 +192,7 @@ class DdsArmSimNode:
         self._status(self.wall_clock(), on_status)
 
     def _status(self, now: float, on_status) -> None:
+        self.name_watch.check()
         rtf = self.core.real_time_factor(now)
         self.publish_diagnostics(now)
         if on_status is not None:
@@ -201,5 +204,5 @@ class DdsArmSimNode:
         self.core.finish()
         self.services.close()   # issue 15.3
         self._command_ready = self.command_reader = self.discovery_writer = None
-        self.joint_command_reader = self.clock_writer = None
+        self.joint_command_reader = self.clock_writer = self.name_watch = None
         self.joint_state_writer = self.diagnostics_writer = self.participant = None
