@@ -117,7 +117,7 @@ def test_a_second_node_with_the_same_name_is_warned_about(caplog):
                            start_stamp_ns=0, log=logging.getLogger("second"))
     with caplog.at_level(logging.WARNING):
         deadline = time.monotonic() + TIMEOUT
-        while len({r.name for r in caplog.records if "another node named /arm_sim" in r.message}) < 2:
+        while not [r for r in caplog.records if "another node named /arm_sim" in r.message]:
             assert time.monotonic() < deadline, "the twin was not noticed"
             first.name_watch.check()
             second.name_watch.check()
