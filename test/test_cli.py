@@ -42,7 +42,8 @@ def test_run_json_has_the_documented_keys_and_values(capsys):
     result = json.loads(out)
     assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
                            "channels", "residual", "max_abs_energy_drift", "fault",
-                           "refused_steps", "interrupted_at"}
+                           "refused_steps", "interrupted_at", "error_estimate",
+                           "accumulated_error"}
     assert result["channels"] == {}          # the release has no actuator and no damping
     assert result["t"] == 0.5
     assert [f"{x:.6f}" for x in result["q"]] == ["-1.122654", "0.593820"]

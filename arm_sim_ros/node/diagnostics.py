@@ -47,6 +47,9 @@ def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held:
         ("substeps_per_step", str(sim.substeps)),
         ("substeps_taken", str(sim.substeps_taken)),
         ("refused_steps", str(sim.refused_steps)),
+        # physics/accuracy.py: the latest local error estimate and their sum since reset
+        ("error_estimate", f"{sim.error_estimate:.3e}"),
+        ("accumulated_error", f"{sim.accumulated_error:.3e}"),
         # Friction, limits and clamps switched inside steps, by kind (none without them).
         ("switch_events", " ".join(f"{k}={n}" for k, n in sorted(sim.switch_events.items()))
          or "0"),

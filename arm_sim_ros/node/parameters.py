@@ -68,6 +68,8 @@ PARAMETERS = (
     _scene_spec("integrator", "str", "Runge-Kutta method (rk4 default)"),
     _scene_spec("rtol", "float", "relative error tolerance of integrator dopri5"),
     _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
+    _scene_spec("tolerance", "float", "local error per simulated second a fixed step may "
+                "make before it splits into sub-steps (0 = estimate only)"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),

@@ -242,12 +242,13 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
                                          _final(tableau, channels, error_weights, error_weights,
                                                 extra)):
         lines.append(f"    n_{x} = {_combination(x, w, terms)}")
-        lines.append(f"    e_{x} = ({_combination(None, ew, terms)}) "
-                     f"/ (ATOL + RTOL * max(abs({x}), abs(n_{x})))")
+        lines.append(f"    d_{x} = {_combination(None, ew, terms)}")
+        lines.append(f"    e_{x} = d_{x} / (ATOL + RTOL * max(abs({x}), abs(n_{x})))")
         squares.append(f"e_{x} * e_{x}")
     outputs = [f"{k}_{last}" for k in _slopes(extra, channels)[2:]]
     lines.append(f"    return ({', '.join(f'n_{x}' for x in state)},), "
-                 f"({', '.join(outputs)},), sqrt(({' + '.join(squares)}) / {len(state)}.0)")
+                 f"({', '.join(outputs)},), sqrt(({' + '.join(squares)}) / {len(state)}.0), "
+                 f"max({', '.join(f'abs(d_{x})' for x in state[:4 + extra])})")
     source = "\n".join(lines) + "\n"
     namespace = _exec(source, f"<{tableau.name} attempt, {channels} channels>",
                       {"RTOL": float(rtol), "ATOL": float(atol), "sqrt": __import__("math").sqrt})
@@ -259,14 +260,15 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
         # Stateless between calls (each publish interval starts from a trial sub-step of
         # h), so reset() and replays are reproducible bit for bit.
         slopes = f(*y[:4 + extra])
-        done, dt = 0.0, h
+        done, dt, step.last_error = 0.0, h, 0.0
         while True:
             remaining = h - done
             final = dt >= 0.99 * remaining       # no sliver sub-step before the boundary
             if final:
                 dt = remaining
-            new, new_slopes, error = attempt(f, *y, dt, *slopes)
+            new, new_slopes, error, local = attempt(f, *y, dt, *slopes)
             if error <= 1.0:
+                step.last_error += local      # the pair's estimate, rad and rad/s
                 if final:
                     return new
                 y, slopes, done = new, new_slopes, done + dt
@@ -278,5 +280,5 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
                 return (nan,) * size              # cannot meet the tolerance: say so, non-finite
 
     step.source = source
-    step.rtol, step.atol = float(rtol), float(atol)
+    step.rtol, step.atol, step.last_error = float(rtol), float(atol), 0.0
     return step

@@ -12,6 +12,7 @@ from math import isfinite
 from pathlib import Path
 
 from .. import yaml_files
+from .accuracy import DEFAULT_TOLERANCE
 from .effects import BUILDERS, MAPPING_EFFECTS, POLICIES, EffortLimits, JointLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
@@ -51,6 +52,7 @@ class Scene:
     integrator: str = "rk4"
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
+    tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -75,6 +77,9 @@ class Scene:
             if not getattr(self, name) >= 1e-14:
                 raise SceneError(f"{name} = {getattr(self, name)} must be at least 1e-14 "
                                  "(tighter than rounding cannot be met)")
+        if not self.tolerance >= 0:
+            raise SceneError(f"tolerance = {self.tolerance} must be >= 0 (local error per "
+                             "simulated second; 0: estimate only, never split a step)")
         if not MIN_STEP_SIZE <= self.step_size <= MAX_DURATION:
             raise SceneError(f"step_size = {self.step_size} must be positive: from "
                              f"{MIN_STEP_SIZE:g} s (stamps count nanoseconds) to {MAX_DURATION:g} s")

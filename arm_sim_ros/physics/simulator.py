@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
-from math import isfinite
+from math import isfinite, nan
 
-from . import guard, model, stability
+from . import accuracy, guard, model, stability
 from .events import switching as switching_for
 from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, compile_step
@@ -102,6 +102,7 @@ class Simulator:
         self.switching, self._advance = switching_for(   # friction, limits: events.py
             self.dynamics, self._tableau, self._step, self._advance, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
+        self.accuracy = accuracy.UNCHECKED if self.switching else self.accuracy
 
     def reset(self) -> None:
         s = self.scene
@@ -117,6 +118,7 @@ class Simulator:
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self._sound = self.state     # the latest state the divergence check found sound
         self.switch_events = self.switching.reset() if self.switching else {}  # by kind
+        self.accuracy.reset()
 
     @property
     def time(self) -> float:
@@ -153,11 +155,26 @@ class Simulator:
                                    self._step)
         if message:
             self._emit("substepping", message)
+        self.accuracy = accuracy.plan(tableau, self._step, self._advance, self.substeps,
+                                      self.scene.tolerance, 4, self._emit)
+        self._advance = self.accuracy.advance
 
     @property
     def substeps_taken(self) -> int:
-        """Sub-steps run since reset in split steps (0 while plain RK4 is stable)."""
+        """Sub-steps run since reset in split steps (0 while plain steps do)."""
+        if self.accuracy.taken is not None:        # stability and tolerance (accuracy.py)
+            return self.accuracy.taken
         return self.steps * self.substeps if self.substeps > 1 else 0
+
+    @property
+    def error_estimate(self) -> float:
+        """The latest step's local error estimate, rad and rad/s (NaN: modes switch)."""
+        return self.accuracy.error_estimate
+
+    @property
+    def accumulated_error(self) -> float:
+        """Σ error_estimate since reset: bounds the global error while errors do not grow."""
+        return self.accuracy.accumulated_error
 
     @property
     def holding(self) -> bool:
@@ -214,18 +231,7 @@ class Simulator:
 
     def energies(self, state) -> tuple[float, float]:
         """(kinetic, stored); NaN where sin fails (angles near 1e308), not a crash."""
-        q, qd, extra = state[0:2], state[2:4], state[4:4 + len(self.extra)]
-        try:
-            stored = 0.0
-            for effect in self.dynamics.active:
-                stored += effect.stored_energy(self.arm, q, extra[self._extra_at(effect)])
-            return model.kinetic_energy(self.arm, q, qd), stored
-        except (ValueError, OverflowError):
-            return float("nan"), float("nan")
-
-    def _extra_at(self, effect) -> slice:
-        start = self.extra.index(effect.state[0]) if effect.state else 0
-        return slice(start, start + len(effect.state))
+        return energies(self, state)
 
     def energy(self, state) -> float:
         return sum(self.energies(state))
@@ -248,17 +254,7 @@ class Simulator:
         return tuple(self.dynamics.joint_torque(self.state if state is None else state))
 
     def sample(self) -> Sample:
-        y = self.state
-        q, qd = (y[0], y[1]), (y[2], y[3])
-        kinetic, potential = self.energies(y)
-        channels = self.channel_values(y)
-        inputs, losses = self.books(y)
-        return Sample(t=self.time, q=q, qd=qd, tau=self.joint_torque(y),
-                      kinetic=kinetic, potential=potential, work=channels.get("work", 0.0),
-                      dissipated=channels.get("dissipated", 0.0),
-                      initial_energy=self.initial_energy,
-                      extra=dict(zip(self.extra, y[4:4 + len(self.extra)])),
-                      channels=channels, inputs=inputs, losses=losses)
+        return sample(self)
 
     def run(self, duration: float, on_step=None) -> float:
         """Advance by `duration` (whole steps); return the largest |residual| at any step."""
@@ -272,3 +268,29 @@ class Simulator:
         if steps and not self.holding:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest
+
+
+def energies(sim: Simulator, state) -> tuple[float, float]:
+    """(kinetic, stored) of `state`; NaN where sin fails (angles near 1e308), not a crash."""
+    q, qd, extra = state[0:2], state[2:4], state[4:4 + len(sim.extra)]
+    try:
+        stored = 0.0
+        for effect in sim.dynamics.active:
+            start = sim.extra.index(effect.state[0]) if effect.state else 0
+            stored += effect.stored_energy(sim.arm, q, extra[start:start + len(effect.state)])
+        return model.kinetic_energy(sim.arm, q, qd), stored
+    except (ValueError, OverflowError):
+        return nan, nan
+
+
+def sample(sim: Simulator) -> Sample:
+    """The arm and its energy books now."""
+    y = sim.state
+    kinetic, potential = sim.energies(y)
+    channels = sim.channel_values(y)
+    inputs, losses = sim.books(y)
+    return Sample(t=sim.time, q=(y[0], y[1]), qd=(y[2], y[3]), tau=sim.joint_torque(y),
+                  kinetic=kinetic, potential=potential, work=channels.get("work", 0.0),
+                  dissipated=channels.get("dissipated", 0.0), initial_energy=sim.initial_energy,
+                  extra=dict(zip(sim.extra, y[4:4 + len(sim.extra)])),
+                  channels=channels, inputs=inputs, losses=losses)

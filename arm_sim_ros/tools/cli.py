@@ -118,6 +118,10 @@ def cmd_run(args) -> int:
             finish_all(recorders, sim)
     result = sim.sample().as_dict() | {"max_abs_energy_drift": drift, "fault": sim.fault,
                                        "refused_steps": sim.refused_steps,
+                                       # None where modes switch (no estimate yet)
+                                       **{k: (v if v == v else None) for k, v in (
+                                           ("error_estimate", sim.error_estimate),
+                                           ("accumulated_error", sim.accumulated_error))},
                                        "interrupted_at": sim.time if stop.requested else None}
     for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
         print(f"arm-sim: {event.kind} at t = {event.t:g} s: {event.message}", file=sys.stderr)
