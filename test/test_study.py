@@ -133,3 +133,12 @@ def test_accuracy_command_refuses_an_unwritable_json_path_before_the_study(tmp_p
     assert code == 2
     out, err = capsys.readouterr()
     assert out == "" and "missing does not exist" in err     # nothing ran
+
+
+def test_the_study_runs_a_scene_with_extra_states_and_channels(capsys):
+    """Windings add currents to the state and three channels: the reference and every run
+    carry them (the reference integrates the scene's own right-hand side)."""
+    code = cli.main(["accuracy", "--scene", "motor_windings_hold", "--duration", "0.05",
+                     "--integrators", "rk4", "--steps", "0.0005", "0.00025"])
+    out = capsys.readouterr().out
+    assert code == 0 and "rk4" in out and "fitted order" in out

@@ -77,7 +77,8 @@ def reference(scene: Scene, times) -> list[tuple]:
         # against separately written equations in test/test_effects.py, so here the
         # reference integrates the generated right-hand side (integration error only).
         f = sim.dynamics.function
-        rates = lambda t, y: (y[2], y[3], *f(*y))  # noqa: E731  (f gives the rest)
+        width = 4 + len(sim.extra)          # f takes q, q̇ and the extra states, not channels
+        rates = lambda t, y: (y[2], y[3], *f(*y[:width]))  # noqa: E731  (f gives the rest)
 
     solution = solve_ivp(rates, (times[0], times[-1]), list(sim.state), method="DOP853",
                          t_eval=times, rtol=REFERENCE_TOLERANCE, atol=REFERENCE_TOLERANCE)
@@ -102,7 +103,7 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
     """One method at one step size (or tolerance) against the reference samples."""
     sim = Simulator(scene.replace(integrator=name, step_size=step_size))
     tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
-    step = compile_step(INTEGRATORS[name], len(sim.channels), **tolerances)
+    step = compile_step(INTEGRATORS[name], len(sim.channels), extra=len(sim.extra), **tolerances)
     every = scene.steps_for(times[1] - times[0], step_size) if len(times) > 1 else 1
     total = every * (len(times) - 1)
     y0 = sim.state
