@@ -106,7 +106,7 @@ class ArmSimCore:
 
     def _apply(self, reason: str | None, command) -> str | None:
         if reason is not None:
-            self.recorder.event(f"refused command: {reason}", "warn")
+            self.recorder.refused(reason)
         elif command is not None:
             self._set_command(*command)
             if self.config.values["lockstep"]:     # one tick per command, under that command

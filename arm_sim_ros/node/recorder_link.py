@@ -61,11 +61,13 @@ class RecorderLink:
             self.recorder = None
 
     def event(self, text: str, level: str = "info") -> None:
-        """A line in the recording's events, at the level the node logged it (a refused
-        command is also counted in the tick's story)."""
-        if text.startswith("refused command"):
-            self._refused += 1
+        """A line in the recording's events, at the level the node logged it."""
         self.call("event", text, level)
+
+    def refused(self, reason: str) -> None:
+        """A refused command: a warning in the events, counted in the tick's story."""
+        self._refused += 1
+        self.event(f"refused command: {reason}", "warn")
 
     def step(self, steps: int, wall_now: float | None = None,
              late_ticks: int | None = None) -> None:
