@@ -23,6 +23,7 @@ setup(
         share("launch", "*.launch.py"),
         share("urdf", "*.urdf"),
         share("urdf", "*.xml"),
+        share("rviz", "*.rviz"),
     ],
     python_requires=">=3.10",
     # Pinned: what CI and the README install. On a ROS machine rosdep supplies numpy/yaml.

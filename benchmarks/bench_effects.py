@@ -44,16 +44,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
 
 from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
-from bench_peers import fastest, mjcf  # noqa: E402  (best-of-repeats; the arm as MJCF)
 
 from arm_sim_ros.physics import model as arm_model  # noqa: E402
 from arm_sim_ros.physics.effects import Motors  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
+from arm_sim_ros.tools.mujoco_peer import (fastest, mujoco_data,  # noqa: E402
+                                           mujoco_model as peer_model)
 
 STEP = 1e-3              # s: the windings' L/R is 0.53 ms, so h must be this small
 CHECK_SECONDS = 1.0      # agreement run
-JOINTS = ("link1_joint", "link2_joint")    # bench_peers.mjcf's names
 
 # The maxon EC 45 flat 70 W through 100:1 and 50:1 gears (figures: config/scenes/geared_arm.yaml).
 GEARS = {"gear_ratio": (100.0, 50.0), "rotor_inertia": (1.81e-5, 1.81e-5)}
@@ -101,67 +101,14 @@ ROWS = [
 # ---------------------------------------------------------------- MuJoCo's side
 
 def mujoco_model(scene):
-    """(MjModel, ctrl) of the scene with its effects in MuJoCo's terms, or (None, why) where
-    this benchmark has no MuJoCo counterpart for one of them."""
-    import mujoco
+    """(MjModel, ctrl) of the scene with its effects in MuJoCo's terms (RK4), or (None, why)
+    where MuJoCo has no counterpart for one of them (arm_sim_ros.tools.mujoco_peer)."""
+    from arm_sim_ros.tools.mujoco_peer import Unsupported
 
-    if scene.controller_model is not None:
-        return None, "controller_model"
-    if scene.policy not in ("zero", "constant"):
-        return None, f"policy {scene.policy}"
-    spec = mujoco.MjSpec.from_string(mjcf(scene.replace(damping=0.0), "RK4"))
-    spec.compiler.degree = False          # springref in radians (MJCF's default is degrees)
-    joints = [spec.joint(name) for name in JOINTS]
-    damping = scene.damping if isinstance(scene.damping, tuple) else (scene.damping,) * 2
-    springs = scene.springs or {"stiffness": (0.0, 0.0), "rest_positions": (0.0, 0.0)}
-    motors = Motors(**scene.motors) if scene.motors is not None else None
-    for i, joint in enumerate(joints):
-        joint.damping = [damping[i], 0.0, 0.0]            # (linear, quadratic, cubic)
-        joint.stiffness = [springs["stiffness"][i], 0.0, 0.0]
-        joint.springref = springs["rest_positions"][i]
-        if motors is not None:
-            n, j = motors.gear_ratio[i], motors.rotor_inertia[i]
-            joint.armature = n * n * j
-    if scene.payload is not None:
-        tip = spec.body("link2").add_body(name="payload", pos=[scene.link_lengths[1], 0.0, 0.0])
-        tip.explicitinertial = True
-        tip.mass, tip.ipos, tip.inertia = scene.payload["mass"], [0.0, 0.0, 0.0], [0.0] * 3
-    torque = scene.constant_torque if scene.policy == "constant" else (0.0, 0.0)
-    ctrl = []
-    if motors is not None and motors.windings:
-        if scene.effort_limits is not None:   # ours clamps the request before the driver
-            torque = tuple(min(max(t, -e), e) for t, e in zip(torque, scene.effort_limits))
-        for i, name in enumerate(JOINTS):
-            n, r = motors.gear_ratio[i], motors.resistance[i]
-            l, k = motors.inductance[i], motors.torque_constant[i]
-            actuator = spec.add_actuator(name=f"{name}_dcmotor", target=name,
-                                         trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            actuator.set_to_dcmotor(motorconst=[k, k], resistance=r, inductance=[l, 0.0])
-            actuator.gear[0] = n
-            if motors.voltage_limit is not None:
-                actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-                actuator.ctrlrange = [-motors.voltage_limit[i], motors.voltage_limit[i]]
-            ctrl.append(r * torque[i] / (n * k))       # our driver's voltage, held
-    elif scene.policy == "constant":
-        for i, name in enumerate(JOINTS):
-            actuator = spec.add_actuator(name=f"{name}_motor", target=name,
-                                         trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            actuator.set_to_motor()
-            if scene.effort_limits is not None:
-                actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-                actuator.forcerange = [-scene.effort_limits[i], scene.effort_limits[i]]
-            ctrl.append(torque[i])
-    return spec.compile(), ctrl
-
-
-def mujoco_data(model, scene, ctrl):
-    import mujoco
-
-    data = mujoco.MjData(model)
-    data.qpos[:] = scene.initial_positions
-    data.qvel[:] = scene.initial_velocities
-    data.ctrl[:] = ctrl
-    return data
+    try:
+        return peer_model(scene, "RK4")
+    except Unsupported as error:
+        return None, str(error).split(" (")[0]
 
 
 def time_mujoco(model, scene, ctrl, steps: int, repeat: int) -> float:

@@ -1,9 +1,8 @@
 """Our arm side by side with the same arm in MuJoCo, timed in the same run.
 
-The MuJoCo model is built from the scene: hinges about z, gravity along -y, each rod's
-inertia given explicitly (COM inertia about z from the scene, about the rod axis tiny but
-non-zero so the body is valid), no contacts. Built this way MuJoCo's RK4 reproduces ours
-to ~1e-15. Errors are the max state error against the DOP853 reference (study.reference)
+The MuJoCo model is built from the scene by arm_sim_ros.tools.mujoco_peer (hinges about z,
+gravity along -y, explicit inertials, no contacts), as `arm-sim accuracy` builds it. Built
+this way MuJoCo's RK4 reproduces ours to ~1e-15. Errors are the max state error against the DOP853 reference (study.reference)
 at every publish time; times are the fastest of --repeat runs; ratios are against ours.
 
     pip install .[bench]
@@ -12,46 +11,13 @@ at every publish time; times are the fastest of --repeat runs; ratios are agains
 from __future__ import annotations
 
 import argparse
-import time
-
 import numpy as np
 
 from arm_sim_ros.physics.batch import Batch
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.tools.accuracy import reference, sample_times
-
-AXIAL_INERTIA = 1e-9     # about the rod axis: physically ~0 for a thin rod, must be > 0
-
-
-def mjcf(scene, integrator: str) -> str:
-    """MJCF for the scene's arm (zero torque policy; joint damping = scene damping)."""
-    (l1, l2), (m1, m2), (r1, r2), (i1, i2) = (scene.link_lengths, scene.link_masses,
-                                              scene.com_distances, scene.com_inertias)
-
-    def link(name, length, mass, com, inertia, child=""):
-        return (f'<body name="{name}"><joint name="{name}_joint" type="hinge" axis="0 0 1" '
-                f'damping="{scene.damping!r}"/>'
-                f'<geom type="capsule" fromto="0 0 0 {length!r} 0 0" size="0.02" contype="0" '
-                f'conaffinity="0"/>'
-                f'<inertial pos="{com!r} 0 0" mass="{mass!r}" '
-                f'diaginertia="{AXIAL_INERTIA!r} {inertia!r} {inertia!r}"/>{child}</body>')
-
-    inner = link("link2", l2, m2, r2, i2).replace('<body name="link2"',
-                                                   f'<body name="link2" pos="{l1!r} 0 0"', 1)
-    return (f'<mujoco model="arm_sim_ros"><option timestep="{scene.step_size!r}" '
-            f'integrator="{integrator}" gravity="0 {-scene.gravity!r} 0"/>'
-            f'<worldbody>{link("link1", l1, m1, r1, i1, inner)}</worldbody></mujoco>')
-
-
-def fastest(run, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        run()
-        best = min(best, time.perf_counter() - start)
-    return best
-
+from arm_sim_ros.tools.mujoco_peer import fastest, mjcf
 
 def ours_single(scene, steps: int):
     sim = Simulator(scene)
@@ -92,7 +58,9 @@ def single_arm_table(scene, duration: float, repeat: int) -> list[str]:
     steps = scene.steps_for(duration)
     times = sample_times(scene, duration, scene.step_size)
     ref = reference(scene, times)
-    rows = [(f"ours {name} (Simulator.step)", *ours_single(scene.replace(integrator=name), steps))
+    # tolerance 0: the scheme alone, so that ours and MuJoCo's take the same steps
+    rows = [(f"ours {name} (Simulator.step)",
+             *ours_single(scene.replace(integrator=name, tolerance=0.0), steps))
             for name in ("rk4", "semi_implicit_euler", "dopri5")]
     for integrator in ("RK4", "implicitfast", "Euler"):
         rows.append((f"mujoco {integrator} (mj_step)", *mujoco_single(scene, integrator, steps)))

@@ -1,18 +1,23 @@
-"""The arm_sim node with robot_state_publisher, so RViz shows the arm move.
+"""The arm_sim node with robot_state_publisher, and RViz to watch the arm move.
 
     ros2 launch arm_sim_ros arm_sim.launch.py
+    ros2 launch arm_sim_ros arm_sim.launch.py rviz:=true
     ros2 launch arm_sim_ros arm_sim.launch.py scene:=damped_release publish_rate:=50.0
     ros2 launch arm_sim_ros arm_sim.launch.py params_file:=/path/to/my_arm_sim.yaml
 
 The node reads its parameters from `params_file` (default: the installed
 config/arm_sim.yaml); the `scene` and `publish_rate` arguments are applied after it, so
-they win. robot_state_publisher turns /joint_states into TF from urdf/two_link_arm.urdf.
+they win. robot_state_publisher publishes urdf/two_link_arm.urdf on /robot_description and
+turns /joint_states into TF; with rviz:=true, rviz2 shows it with rviz/arm_sim.rviz: z up,
+the arm upright in its vertical plane, seen from the side where positive angles turn
+counter-clockwise.
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -32,6 +37,8 @@ def generate_launch_description():
     params_file = DeclareLaunchArgument(
         'params_file', default_value=os.path.join(share, 'config', 'arm_sim.yaml'),
         description='ROS 2 parameters file for the arm_sim node')
+    rviz = DeclareLaunchArgument(
+        'rviz', default_value='false', description='start rviz2 with rviz/arm_sim.rviz')
 
     arm_sim = Node(
         package='arm_sim_ros',
@@ -54,5 +61,13 @@ def generate_launch_description():
         output='screen',
         parameters=[{'robot_description': robot_description}],
     )
+    rviz2 = Node(
+        package='rviz2',
+        executable='rviz2',
+        output='screen',
+        arguments=['-d', os.path.join(share, 'rviz', 'arm_sim.rviz')],
+        condition=IfCondition(LaunchConfiguration('rviz')),
+    )
 
-    return LaunchDescription([scene, publish_rate, params_file, arm_sim, robot_state_publisher])
+    return LaunchDescription([scene, publish_rate, params_file, rviz, arm_sim,
+                              robot_state_publisher, rviz2])

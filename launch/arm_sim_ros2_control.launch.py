@@ -5,6 +5,7 @@ effort controller, plus robot_state_publisher.
     ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py
     ros2 topic pub --once /effort_controller/commands std_msgs/msg/Float64MultiArray \
         "{data: [20.0, 5.0]}"
+    ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py rviz:=true   # and rviz2
 
 Needs ros2_control, ros2_controllers (effort_controllers, joint_state_broadcaster) and
 topic_based_hardware_interfaces. The node takes the controller's JointState efforts on
@@ -15,6 +16,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -55,4 +57,10 @@ def generate_launch_description():
                   arguments=['effort_controller'])
     state_publisher = Node(package='robot_state_publisher', executable='robot_state_publisher',
                            output='screen', parameters=[description])
-    return LaunchDescription([scene, arm_sim, control, broadcaster, effort, state_publisher])
+    rviz = DeclareLaunchArgument('rviz', default_value='false',
+                                 description='start rviz2 with rviz/arm_sim.rviz')
+    rviz2 = Node(package='rviz2', executable='rviz2', output='screen',
+                 arguments=['-d', os.path.join(share, 'rviz', 'arm_sim.rviz')],
+                 condition=IfCondition(LaunchConfiguration('rviz')))
+    return LaunchDescription([scene, rviz, arm_sim, control, broadcaster, effort,
+                              state_publisher, rviz2])

@@ -126,8 +126,10 @@ def test_batch_command_refuses_bad_counts(capsys):
 # --- Every effect ----------------------------------------------------------------------
 
 def full_state(scene, steps, command=None):
-    """Every state entry of one arm: q, q̇, extra states (winding currents), every channel."""
-    sim = Simulator(scene)
+    """Every state entry of one arm: q, q̇, extra states (winding currents), every channel.
+    A batch takes the stability plan's sub-steps only, never a tolerance's (accuracy.py):
+    the arm it equals runs with tolerance 0."""
+    sim = Simulator(scene.replace(tolerance=0.0))
     if command is not None:
         sim.set_command(*command)
     for _ in range(steps):

@@ -1,6 +1,7 @@
 """`arm-sim scenes` and `arm-sim run`: outputs, overrides, and one-line refusals with exit code 2."""
 import csv
 import json
+import math
 import subprocess
 import sys
 
@@ -77,6 +78,7 @@ def test_csv_has_initial_row_plus_one_per_step(capsys, tmp_path):
     assert code == 0
     rows = list(csv.DictReader(path.open()))
     assert list(rows[0]) == list(csv_file.CSV_COLUMNS)
+    assert list(rows[0])[-2:] == ["error_estimate", "accumulated_error"]
     assert len(rows) == 201
     assert float(rows[0]["t"]) == 0.0 and float(rows[-1]["t"]) == 2.0
     last = rows[-1]
@@ -121,3 +123,52 @@ def test_console_script_refuses_without_traceback():
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert proc.stderr.startswith("arm-sim: error: link_masses[0] = -1.0 is impossible")
+
+
+def test_run_prints_the_error_estimate_with_its_units_and_the_tolerance(capsys):
+    """The latest step's local error estimate and their sum, as --json has them, in the
+    text output: rad, rad/s (max over q, q̇), and what holds them."""
+    held = ("--scene", "damped_release", "--set", "tolerance=0.002")
+    code, out, _ = run_cli(capsys, "run", *held, "--json")
+    result = json.loads(out)
+    code, out, _ = run_cli(capsys, "run", *held)
+    assert code == 0
+    line = out.splitlines()[-1]
+    assert line == (f"error estimate: latest step {result['error_estimate']:.3e}, accumulated "
+                    f"{result['accumulated_error']:.3e} (rad, rad/s: max over q, qd); "
+                    "tolerance 0.002 per s (scaled: |e|/(1+|y|))")
+    sim = Simulator(load_scene("damped_release").replace(tolerance=0.002))
+    sim.run(2.0)
+    assert result["accumulated_error"] == sim.accumulated_error > result["error_estimate"] > 0
+    _, out, _ = run_cli(capsys, "run", "--set", "tolerance=0")
+    assert out.splitlines()[-1].endswith("; tolerance 0 (estimate only)")
+    _, out, _ = run_cli(capsys, "run", "--set", "integrator=dopri5")
+    assert out.splitlines()[-1].endswith("; rtol 1e-08, atol 1e-10 (dopri5)")
+
+
+# Damping far beyond the stability planner's reach: every step is refused, none estimated.
+UNESTIMATED = ("--scene", "damped_release", "--set", "damping=1e9", "--duration", "0.05")
+
+
+def test_a_run_without_an_estimate_prints_n_a_and_null(capsys):
+    assert math.isnan(Simulator(load_scene("damped_release").replace(damping=1e9)).error_estimate)
+    _, out, _ = run_cli(capsys, "run", *UNESTIMATED)
+    assert "error estimate: latest step n/a, accumulated n/a (rad, rad/s" in out
+    _, out, _ = run_cli(capsys, "run", *UNESTIMATED, "--json")
+    result = json.loads(out)
+    assert result["error_estimate"] is None and result["accumulated_error"] is None
+
+
+def test_csv_rows_carry_each_steps_error_estimate_and_their_sum(capsys, tmp_path):
+    path = tmp_path / "books.csv"
+    assert run_cli(capsys, "run", "--scene", "stick_slip", "--csv", str(path),
+                   "--duration", "0.5")[0] == 0
+    rows = list(csv.DictReader(path.open()))
+    sim = Simulator(load_scene("stick_slip"))
+    expected = [(sim.error_estimate, sim.accumulated_error)]
+    sim.run(0.5, lambda s: expected.append((s.error_estimate, s.accumulated_error)))
+    assert [(float(r["error_estimate"]), float(r["accumulated_error"])) for r in rows] == expected
+    assert float(rows[-1]["accumulated_error"]) > 0
+    run_cli(capsys, "run", *UNESTIMATED, "--csv", str(path), "--force")
+    rows = list(csv.DictReader(path.open()))
+    assert {r["error_estimate"] for r in rows} == {r["accumulated_error"] for r in rows} == {"nan"}

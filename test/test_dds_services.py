@@ -28,10 +28,12 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from arm_sim_ros.node import messages as msg, parameter_services as ps
 from arm_sim_ros.node.parameters import PARAMETERS, SPECS
+from arm_sim_ros.node.ros_args import node_identity, parse_ros_args
 from arm_sim_ros.node.transports import dds_service_types as t
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from arm_sim_ros.node.transports.dds_services import (cs_id, endpoint_qos, from_value, to_value,
                                                       user_data_value)
+from arm_sim_ros.physics.effects import MAPPING_EFFECTS
 
 TIMEOUT = 5.0
 CONFIG = msg.loopback_config(f"arm_sim_test_dds_services_{os.getpid()}")
@@ -125,8 +127,11 @@ def test_list_get_types_and_describe_answer_as_rclpy_does():
     lister, getter, typer, describer = clients(
         p, "list_parameters", "get_parameters", "get_parameter_types", "describe_parameters")
     result = lister.call(node, prefixes=[], depth=0).result
-    assert result.names == [spec.name for spec in PARAMETERS] and result.prefixes == []
+    assert result.names == [spec.name for spec in PARAMETERS]
+    assert result.prefixes == list(MAPPING_EFFECTS)        # friction.coulomb... as rclpy lists them
     assert lister.call(node, prefixes=["damping"], depth=0).result.names == ["damping"]
+    assert lister.call(node, prefixes=["friction"], depth=0).result.names == [
+        "friction.coulomb", "friction.static", "friction.stribeck_velocity"]
     assert lister.call(node, prefixes=["nothing"], depth=0).result.names == []
 
     names = ["damping", "joint_names", "scene", "rerun_spawn", "constant_torque", "publish_rate"]
@@ -201,6 +206,40 @@ def test_set_atomically_is_all_or_nothing():
     assert node.core.config.values["gravity"] == 0.0
     # a damping given as a pair is served as a double array from now on
     assert typer.call(node, names=["damping", "gravity"]).types == [ps.DOUBLE_ARRAY, ps.DOUBLE]
+
+
+def test_effects_are_parameters_on_the_wire_live_ones_set_start_only_ones_refused():
+    node, p = start(126, scene="stick_slip")
+    setter, getter, atomic = clients(p, "set_parameters", "get_parameters",
+                                     "set_parameters_atomically")
+    values = getter.call(node, names=["friction.coulomb", "friction.static", "effort_limits",
+                                      "motors.gear_ratio"]).values
+    assert [(v.type, from_value(v)) for v in values] == [
+        (ps.DOUBLE_ARRAY, [3.0, 0.5]), (ps.DOUBLE_ARRAY, [4.0, 0.8]),
+        (ps.NOT_SET, None), (ps.NOT_SET, None)]          # not named by the scene: absent
+    for _ in range(5):
+        node.tick()
+    steps = node.core.sim.steps
+    results = setter.call(node, parameters=[
+        param("effort_limits", ps.INTEGER_ARRAY, [15, 10]),
+        param("friction.static", ps.DOUBLE_ARRAY, [1.0, 1.0]),
+        param("motors.gear_ratio", ps.DOUBLE_ARRAY, [10.0, 10.0]),
+        param("friction.coulomb", ps.DOUBLE_ARRAY, [2.0, 0.4]),
+    ]).results
+    assert [r.successful for r in results] == [True, False, False, True]
+    assert "parameter 'friction.static' refused" in results[1].reason and \
+        "breakaway needs Fs >= Fc" in results[1].reason
+    assert "parameter 'motors.gear_ratio' refused: motors.gear_ratio is start-only" in \
+        results[2].reason
+    scene = node.core.sim.scene
+    assert scene.effort_limits == (15.0, 10.0) and scene.friction["coulomb"] == (2.0, 0.4)
+    assert node.core.sim.steps == steps            # carried on: not restarted
+    before = node.core.config.values
+    result = atomic.call(node, parameters=[
+        param("effort_limits", ps.DOUBLE_ARRAY, [5.0, 5.0]),
+        param("controller_model.link_masses", ps.DOUBLE_ARRAY, [1.0, -1.0])]).result
+    assert not result.successful and "controller_model.link_masses" in result.reason
+    assert node.core.config.values == before
 
 
 def test_reset_restarts_the_scene():
@@ -353,6 +392,36 @@ def test_service_names_follow_the_namespace():
     assert node.services.node == "/robot/arm_sim"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
         f"rq/robot/arm_sim/{s}Request" for s in SERVICES}
+
+
+def remapped(domain_id, *rules):
+    """A node started with `--ros-args -r RULE ...`, as arm_sim_node reads them."""
+    name, namespace, remap = node_identity(parse_ros_args(
+        [arg for rule in rules for arg in ("-r", rule)])["remap"])
+    node = DdsArmSimNode({}, domain_id=domain_id, config=CONFIG, name=name,
+                         namespace=namespace, remap=remap)
+    return node, msg.make_participant(domain_id, CONFIG)
+
+
+def test_a_remapped_node_serves_its_parameters_and_reset_under_its_new_name():
+    node, p = remapped(124, "__node:=other", "__ns:=/ns")
+    assert node.services.node == "/ns/other"
+    assert {e.reader.topic.name for e in node.services.endpoints} == {
+        f"rq/ns/other/{s}Request" for s in SERVICES}
+    getter = Client(p, "get_parameters", node_name="/ns/other")
+    reset = Client(p, "reset", node_name="/ns/other")
+    for client in (getter, reset):
+        client.wait_for_service()
+    assert [from_value(v) for v in getter.call(node, names=["gravity"]).values] == [9.81]
+    assert reset.call(node).success
+
+
+def test_service_and_event_names_follow_remap_rules_as_topic_names_do():
+    node, _ = remapped(125, "arm_sim:__node:=left", "~/reset:=/restart_left",
+                       "other:__node:=ignored", "/parameter_events:=/left_events")
+    topics = {e.reader.topic.name for e in node.services.endpoints}
+    assert "rq/restart_leftRequest" in topics and "rq/left/get_parametersRequest" in topics
+    assert node.services.events_writer.topic.name == "rt/left_events"
 
 
 # --- bytes on the wire -----------------------------------------------------------------------

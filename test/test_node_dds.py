@@ -212,7 +212,9 @@ def test_runtime_parameter_refusal_changes_nothing():
     assert core.set_parameters({"torque_limit": 10.0}) == ["torque_limit"]
     assert core.sim.steps == 7  # a node setting: the motion goes on
     assert core.set_parameters({"damping": 1.0}) == ["damping"]
-    assert core.sim.steps == 0 and core.sim.scene.damping == 1.0  # physics: scene restarts
+    assert core.sim.steps == 7 and core.sim.scene.damping == 1.0  # a live effect: goes on too
+    assert core.set_parameters({"gravity": 1.0}) == ["gravity"]
+    assert core.sim.steps == 0 and core.sim.scene.gravity == 1.0  # the arm: scene restarts
 
 
 def test_integer_rates_from_the_command_line_are_taken_as_doubles():
@@ -297,6 +299,35 @@ def test_free_running_spin_ticks_exactly_the_duration():
     assert node.core.sim.steps == 100 and node.core.sim.time == 100 * 0.005
     assert len(peer.read(peer.joint_states, 25, msg.JointState)) == 25
     assert "refused commands 0" in lines[-1]
+
+
+def spin_changing(node, duration, changes):
+    """spin(duration) with `changes[tick]` (a parameter set, or "reset") applied before that
+    tick, as a `ros2 param set` or a `~/reset` served between ticks would be."""
+    tick, count = node.tick, [0]
+
+    def changing_tick(now=None):
+        change = changes.get(count[0])
+        if change == "reset":
+            node.core.reset()
+        elif change is not None:
+            node.core.set_parameters(change)
+        count[0] += 1
+        return tick(now)
+
+    node.tick = changing_tick
+    node.spin(duration)
+    return count[0]
+
+
+def test_duration_is_simulated_time_whatever_the_rate_becomes_and_across_resets():
+    node, _ = start(19, real_time_factor=0.0, step_size=0.005, publish_rate=50.0)
+    # 10 ticks of 20 ms, then 25 ms ticks (publish_rate 40): 0.2 s + 32 x 25 ms = 1.0 s
+    ticks = spin_changing(node, 1.0, {10: {"publish_rate": 40.0}})
+    assert ticks == 42 and node.core.stamp_ns() - node.core.start_stamp_ns == 1_000_000_000
+    node, _ = start(20, real_time_factor=0.0, step_size=0.005, publish_rate=50.0)
+    ticks = spin_changing(node, 0.5, {10: "reset"})   # a reset does not rewind the duration
+    assert ticks == 25 and node.core.sim.time == pytest.approx(0.3)
 
 
 def test_reset_restarts_the_scene_and_stamps_keep_increasing():
@@ -473,3 +504,19 @@ def test_send_torque_command_line(monkeypatch, capsys):
     assert "no subscriber on joint_torque_commands" in capsys.readouterr().out
     assert cli_main(["send-torque", "1", "0", "--rate", "0"]) == 2
     assert "--rate 0.0 must be a positive number" in capsys.readouterr().err
+
+
+def test_the_tick_schedule_makes_up_a_short_lag_and_restarts_after_a_long_one():
+    from arm_sim_ros.node.schedule import CATCH_UP, TickSchedule
+    period = 0.002                                  # 100 Hz at real_time_factor 5
+    schedule = TickSchedule(0.0)
+    schedule.ticked(0.0, period)
+    assert schedule.wait(0.001) > 0                 # early: wait for it
+    late = 0.0105                                   # a callback 8.5 ms late (Python's cost)
+    due = 0
+    while schedule.wait(late) <= 0:                 # ticks back to back until on schedule
+        schedule.ticked(late, period)
+        due += 1
+    assert due == 5 and 0 < schedule.wait(late) <= period
+    schedule.ticked(1.0, period)                    # a one-second stall: no burst after it
+    assert schedule.next_tick == 1.0 and CATCH_UP < 1.0

@@ -1,12 +1,21 @@
-"""The node runs every effect scene: per-joint damping as a parameter, the payload as a
-parameter that grasps and releases at run time, and JointState effort is the torque the
-joints receive (after effort limits and motor windings)."""
+"""The node runs every effect scene, and every effect is a parameter named as the scene file
+names its key (`friction.coulomb`, `effort_limits`, `payload.mass`...): set at start it is the
+scene file's value; the safe ones (payload, effort limits, friction, damping, the controller's
+model) change while it runs, from the next step, with the state and the energy books carried
+over; the others are refused live as start-only. JointState effort is the torque the joints
+receive (after effort limits and motor windings)."""
 import logging
+import math
 
 import pytest
 
 from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.main import main as node_main
+from arm_sim_ros.node.parameters import (EFFECT_PARAMETERS, LIVE, START_ONLY, ParameterRefused,
+                                         resolve_parameters)
+from arm_sim_ros.node.ros_args import load_params_file
+from arm_sim_ros.physics import model
+from arm_sim_ros.physics.effects import MAPPING_EFFECTS
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -46,16 +55,16 @@ def test_effort_is_what_the_joint_receives_after_the_effort_limit():
     assert abs(state.effort[0]) == pytest.approx(15.0)
 
 
-def test_payload_mass_grasps_and_releases_without_a_restart_and_the_books_close():
+def test_payload_grasps_and_releases_live_without_a_restart_and_the_books_close():
     core = make_core(scene="release", publish_rate=100.0)
     for _ in range(20):
         core.tick(0.0)
     time_before = core.sim.time
-    assert core.set_parameters({"payload_mass": 0.5}) == ["payload_mass"]
+    assert core.set_parameters({"payload.mass": 0.5}) == ["payload.mass"]
     assert core.sim.time == time_before and core.sim.scene.payload == {"mass": 0.5}
     for _ in range(20):
         core.tick(0.0)
-    core.set_parameters({"payload_mass": 0.0})
+    core.set_parameters({"payload.mass": 0.0})
     for _ in range(20):
         core.tick(0.0)
     assert core.sim.channel_values(core.sim.state)["payload_exchange"] != 0.0
@@ -64,8 +73,8 @@ def test_payload_mass_grasps_and_releases_without_a_restart_and_the_books_close(
 
 def test_a_negative_payload_is_refused_and_changes_nothing():
     core = make_core(scene="release")
-    with pytest.raises(ParameterRefused, match="payload_mass"):
-        core.set_parameters({"payload_mass": -1.0})
+    with pytest.raises(ParameterRefused, match="payload.mass"):
+        core.set_parameters({"payload.mass": -1.0})
     assert core.sim.scene.payload is None
 
 
@@ -120,3 +129,214 @@ def test_switches_inside_steps_are_counted_in_the_diagnostics():
     counted = dict(item.split("=") for item in values["switch_events"].split())
     assert counted == {k: str(n) for k, n in core.sim.switch_events.items()} and counted
     assert dict(make_core(scene="release").diagnostics(0.0).values)["switch_events"] == "0"
+
+
+# --- every effect is a parameter, named as the scene file names its key --------------------
+
+# A value for every key of every effect (hard joint limits; the compliant ones below): the
+# scene file EVERY_EFFECT_SCENE names the same keys with the same values.
+AT_START = {
+    "effort_limits": [15.0, 10.0],
+    "springs.stiffness": [20.0, 5.0], "springs.rest_positions": [0.5, -0.5],
+    "payload.mass": 0.5,
+    "motors.gear_ratio": [100.0, 50.0], "motors.rotor_inertia": [1.81e-5, 1.81e-5],
+    "motors.resistance": [0.573, 0.573], "motors.inductance": [0.301e-3, 0.301e-3],
+    "motors.torque_constant": [0.0404, 0.0404], "motors.voltage_limit": [48.0, 48.0],
+    "controller_model.gravity": 9.0, "controller_model.link_masses": [1.1, 0.9],
+    "controller_model.com_distances": [0.5, 0.45], "controller_model.link_lengths": [1.0, 0.95],
+    "controller_model.payload_mass": 0.4,
+    "friction.coulomb": [0.3, 0.1], "friction.static": [0.4, 0.15],
+    "friction.stribeck_velocity": 0.05,
+    "joint_limits.lower": [-2.0, -2.5], "joint_limits.upper": [2.0, 2.5],
+    "joint_limits.restitution": 0.5,
+}
+COMPLIANT = {"joint_limits.lower": [-0.5, -2.5], "joint_limits.upper": [0.5, 2.5],
+             "joint_limits.stiffness": 500.0, "joint_limits.damping": 2.0}
+
+
+def scene_text(values: dict) -> str:
+    """The same keys as a scene file writes them: `effect: {key: value}` mappings."""
+    lines, effects = [], {}
+    for name, value in values.items():
+        effect, dot, key = name.partition(".")
+        if dot:
+            effects.setdefault(effect, []).append(f"  {key}: {value}")
+        else:
+            lines.append(f"{name}: {value}")
+    for effect, keys in effects.items():
+        lines += [f"{effect}:", *keys]
+    return "\n".join(lines) + "\n"
+
+
+def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_names_it():
+    keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPING_EFFECTS.items()
+                                for p in kind.parameters}
+    assert {spec.name for spec in EFFECT_PARAMETERS} == keys == set(AT_START) | set(COMPLIANT)
+    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair"}  # double, double[]
+
+
+@pytest.mark.parametrize("values", [AT_START, COMPLIANT], ids=["hard_limits", "compliant_limits"])
+def test_every_effect_set_at_start_reaches_the_simulator_as_the_scene_file_would(tmp_path, values):
+    core = make_core(policy="gravity_compensation", step_size=0.001, **values)
+    path = tmp_path / "every_effect.yaml"
+    path.write_text("policy: gravity_compensation\nstep_size: 0.001\n" + scene_text(values))
+    from_file = load_scene(str(path))
+    for effect in {name.partition(".")[0] for name in values}:
+        assert getattr(core.sim.scene, effect) == getattr(from_file, effect), effect
+        assert getattr(core.sim.scene, effect) is not None
+    for name, value in values.items():
+        effect, _, key = name.partition(".")
+        named = getattr(core.sim.scene, effect)
+        assert (named[key] if key else named) == (tuple(value) if isinstance(value, list) else value)
+    assert set(core.sim.dynamics.effects) >= {n.partition(".")[0] for n in values}   # all run
+
+
+def test_a_parameter_overrides_the_scene_files_value_key_by_key():
+    core = make_core(scene="stick_slip", **{"friction.coulomb": [1.0, 0.2]})
+    assert core.sim.scene.friction == {"coulomb": (1.0, 0.2), "static": (4.0, 0.8),
+                                       "stribeck_velocity": 0.05}
+
+
+def test_an_effect_neither_the_scene_nor_a_parameter_names_is_absent_and_not_set():
+    core = make_core(scene="release")
+    assert set(core.sim.dynamics.effects) == {"gravity", "actuator"}
+    assert all(core.config.values[spec.name] is None for spec in EFFECT_PARAMETERS)
+
+
+def test_a_params_file_sets_effects_as_nested_mappings(tmp_path):
+    path = tmp_path / "params.yaml"
+    path.write_text("arm_sim:\n  ros__parameters:\n    effort_limits: [15.0, 10.0]\n"
+                    "    friction:\n      coulomb: [0.5, 0.1]\n      stribeck_velocity: 0.0\n")
+    core = make_core(**load_params_file(str(path)))
+    assert core.sim.scene.effort_limits == (15.0, 10.0)
+    assert core.sim.scene.friction == {"coulomb": (0.5, 0.1), "stribeck_velocity": 0.0}
+
+
+def test_a_ros2_param_dump_with_keys_not_set_starts_the_node_again(tmp_path):
+    """`ros2 param dump` writes a parameter that is not set as null (rcl reads "null")."""
+    path = tmp_path / "dump.yaml"
+    path.write_text("/arm_sim:\n  ros__parameters:\n    effort_limits: null\n"
+                    "    friction:\n      coulomb: [0.5, 0.1]\n      static: null\n"
+                    "    springs:\n      stiffness: null\n")
+    core = make_core(**load_params_file(str(path)))
+    named = make_core(**{"friction.coulomb": [0.5, 0.1]})
+    assert core.sim.scene.friction == named.sim.scene.friction
+    assert core.sim.scene.effort_limits is None and core.sim.scene.springs is None
+
+
+def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_is_start_only():
+    names = {spec.name for spec in EFFECT_PARAMETERS}
+    assert {n.partition(".")[0] for n in names & set(LIVE)} == {
+        "effort_limits", "friction", "controller_model", "payload"}
+    assert names - set(LIVE) == names & set(START_ONLY)
+    assert "damping" in LIVE
+
+
+def test_arm_sim_node_help_lists_every_effect_parameter_and_whether_it_changes_live(capsys):
+    with pytest.raises(SystemExit):
+        node_main(["--help"])
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()
+             if line.startswith("  ") and line.split()}
+    for spec in EFFECT_PARAMETERS:
+        assert lines[spec.name].endswith("start only" if spec.name in START_ONLY
+                                         else "live, state kept"), spec.name
+
+
+# --- live: from the next step, the state and the books carried over ------------------------
+
+def tick(core, n):
+    for _ in range(n):
+        state = core.tick(0.0)
+    return state
+
+
+def test_an_effort_limit_set_live_clamps_the_applied_torque_from_the_next_tick():
+    core = make_core(scene="gravity_compensation_at_rest")
+    held = tick(core, 10)
+    assert held.effort[0] == pytest.approx(19.62, rel=1e-3)   # g1 at the horizontal pose
+    before = (core.sim.state, core.sim.steps)
+    assert core.set_parameters({"effort_limits": [15.0, 10.0]}) == ["effort_limits"]
+    assert (core.sim.state, core.sim.steps) == before        # not a restart
+    state = tick(core, 1)
+    assert state.effort[0] == 15.0 and abs(state.effort[1]) < 10.0   # the shoulder saturates
+    assert tick(core, 20).position[0] < -0.01                 # and the arm sags
+    assert abs(core.sim.residual()) < 1e-6
+
+
+def test_friction_set_live_stops_an_arm_that_would_drift_and_books_its_kinetic_energy():
+    drifting = dict(scene="release", gravity=0.0, initial_velocities=[1.0, -1.0])
+    free, core = make_core(**drifting), make_core(**drifting)
+    tick(free, 10), tick(core, 10)
+    kinetic = core.sim.sample().kinetic
+    core.set_parameters({"friction.coulomb": [2.0, 1.0]})
+    tick(free, 150), tick(core, 150)
+    stopped = core.sim.state
+    tick(free, 20), tick(core, 20)
+    assert core.sim.state[:4] == stopped[:4] and stopped[2:4] == (0.0, 0.0)   # stuck, exactly
+    assert abs(free.sim.state[0] - stopped[0]) > 0.5          # without friction it drifts on
+    assert core.sim.channel_values(core.sim.state)["friction_loss"] == pytest.approx(
+        kinetic, rel=1e-6)                                    # all of it went to friction
+    assert core.sim.switch_events["stick"] == 2              # each joint stuck once
+
+
+def test_a_controller_model_set_live_changes_the_compensation_as_the_believed_arm_says():
+    core = make_core(scene="gravity_compensation_at_rest")
+    tick(core, 10)
+    core.set_parameters({"controller_model.payload_mass": 0.5})
+    state = tick(core, 1)
+    believed = model.gravity_torque(core.sim.scene.links.with_payload(0.5), state.position, 9.81)
+    assert state.effort == pytest.approx(list(believed), rel=1e-12)
+    # compensating for a payload it does not hold, the controller flexes the elbow up (and
+    # the shoulder, coupled through M(q), dips)
+    lifted = tick(core, 20)
+    assert lifted.position[1] > 0.05 and lifted.position[0] < 0.0
+    assert abs(core.sim.residual()) < 1e-6
+
+
+def test_damping_changes_live_and_the_books_close_when_its_channel_goes():
+    core = make_core(scene="damped_release")
+    tick(core, 30)
+    steps = core.sim.steps
+    core.set_parameters({"damping": 0.0})
+    assert core.sim.steps == steps and "dissipated" not in core.sim.channels
+    assert core.sim.retired[1] > 0.1               # the loss so far, kept in the books
+    tick(core, 30)
+    assert abs(core.sim.residual()) < 1e-5
+
+
+@pytest.mark.parametrize("scene, change, reason", [
+    ("stick_slip", {"friction.static": [0.1, 0.1]}, "breakaway needs Fs >= Fc"),
+    ("release", {"friction.static": [1.0, 1.0]}, "friction needs friction.coulomb"),
+    ("release", {"effort_limits": [-1.0, 5.0]}, "must be positive"),
+    ("release", {"effort_limits": 3.0}, "must be a list of two numbers"),
+    ("release", {"friction.stribeck_velocity": math.nan}, "impossible"),
+    ("release", {"controller_model.link_masses": [1.0, 0.0]}, "must be positive"),
+    ("release", {"payload.mass": -0.5}, "must be non-negative"),
+    ("release", {"damping": [0.1, -0.1]}, "would add energy"),
+])
+def test_an_invalid_live_value_is_refused_with_its_reason_and_nothing_changes(scene, change,
+                                                                              reason):
+    core = make_core(scene=scene)
+    tick(core, 3)
+    sim = core.sim
+    before = (core.config, sim.scene, sim.state, sim.steps, sim.dynamics)
+    with pytest.raises(ParameterRefused) as refused:
+        core.set_parameters(change)
+    assert refused.value.name == next(iter(change)) and reason in refused.value.reason
+    assert core.sim is sim and (core.config, sim.scene, sim.state, sim.steps, sim.dynamics) == before
+
+
+@pytest.mark.parametrize("name, value", [
+    ("motors.resistance", [1.0, 1.0]), ("motors.gear_ratio", [10.0, 10.0]),
+    ("springs.stiffness", [5.0, 5.0]), ("joint_limits.lower", [-1.0, -1.0]),
+    ("joint_limits.restitution", 0.9)])
+def test_an_effect_key_that_cannot_change_live_is_refused_as_start_only(name, value):
+    core = make_core(step_size=0.001, **AT_START)
+    tick(core, 2)
+    before = (core.config, core.sim, core.sim.state)
+    with pytest.raises(ParameterRefused, match="start-only") as refused:
+        core.set_parameters({name: value})
+    assert refused.value.name == name and f"-p {name}:=" in refused.value.reason
+    assert (core.config, core.sim, core.sim.state) == before
+    assert core.set_parameters({name: AT_START[name]}) == []     # its own value: no change
+    assert core.set_parameters({"motors.gear_ratio": [100, 50]}) == []   # as integers, too

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+import rerun as rr
 from rosbags.rosbag2 import Reader
 
 from arm_sim_ros.node import core as node_core, parameters as node_params
@@ -309,3 +310,93 @@ def test_an_arm_other_than_the_urdfs_gets_no_3d_view(tmp_path):
     names = {r.get("ViewBlueprint:display_name", [None])[0]
              for r in blueprint_rows(tmp_path / "other.rrd").values()}
     assert not [n for n in names if n and "3D" in n]
+
+
+# --- 7. can I trust this run? -------------------------------------------------------------
+
+def blueprint_tree(path):
+    """(the tab the viewer opens: {display name, views: {view name: (its entity query, its
+    origin, {entity: series names it overrides})}}) of a recording's saved blueprint."""
+    reader = rr.chunk.RrdReader(str(path))
+    (store,) = reader.blueprints()
+    rows, names = {}, {}
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        entity = chunk.entity_path
+        for field in batch.schema.names:
+            values = [v for v in batch.column(field).to_pylist() if v is not None] \
+                if ":" in field and "time" not in field else []
+            if values:
+                rows.setdefault(entity, {})[field] = values[-1]
+        if "/ViewContents/overrides/" in entity and "SeriesLines:names" in batch.schema.names:
+            view, _, rest = entity.partition("/ViewContents/overrides/")
+            names.setdefault(view, {})[rest.partition("/visualizers")[0]] = [
+                v for v in batch.column("SeriesLines:names").to_pylist() if v][-1]
+    (root,) = [r for r in rows.values() if "ContainerBlueprint:active_tab" in r]
+    opened = "/" + root["ContainerBlueprint:active_tab"][0]
+    views = {}
+
+    def walk(entity):
+        for child in rows[entity].get("ContainerBlueprint:contents", []):
+            child = "/" + child
+            if child.startswith("/container/"):
+                walk(child)
+            else:
+                views[rows[child]["ViewBlueprint:display_name"][0]] = (
+                    rows.get(child + "/ViewContents", {}).get("ViewContents:query"),
+                    rows[child].get("ViewBlueprint:space_origin", [None])[0],
+                    names.get(child, {}))
+    walk(opened)
+    return {"name": rows[opened].get("ContainerBlueprint:display_name", [None])[0],
+            "views": views}
+
+
+def test_the_viewer_opens_on_can_i_trust_this_run(tmp_path):
+    """One tab, open first: the residual (J), each step's local error estimate and their
+    sum (rad, rad/s) with the tolerance, the sub-steps, and the events; every series named
+    with its unit."""
+    path = tmp_path / "trust.rrd"
+    record(load_scene("damped_release").replace(duration=0.2, tolerance=2e-3), path)
+    tab = blueprint_tree(path)
+    assert tab["name"] == "Can I trust this run?"
+    views = tab["views"]
+    shown = {tuple(query or ()): (name, origin, named) for name, (query, origin, named)
+             in views.items()}
+    residual, local, accumulated, substeps = (shown[(p,)] for p in (
+        "energy/balance_residual", "accuracy/local_error", "accuracy/accumulated_error",
+        "accuracy/substeps"))
+    assert "[J]" in residual[0] and residual[2] == {
+        "energy/balance_residual": ["residual E−E₀−inputs+losses [J]"]}
+    assert "[rad, rad/s]" in local[0] and "tolerance 0.002 per s" in local[0]
+    assert local[2] == {"accuracy/local_error": ["local error estimate [rad, rad/s]"]}
+    assert accumulated[2] == {"accuracy/accumulated_error":
+                              ["accumulated error estimate [rad, rad/s]"]}
+    assert substeps[2] == {"accuracy/substeps": ["sub-steps per step [1]"]}
+    (events,) = [name for name, (_, origin, _) in views.items() if origin == "events"]
+    assert events.startswith("Events")
+    assert len(views) == 5
+    # ...and the rest is one tab away, as before
+    assert {"Where did the energy go? Books since t = 0 (J): stored + losses = inputs",
+            "Effects the scene calls for"} <= {
+        r.get("ViewBlueprint:display_name", [None])[0] for r in blueprint_rows(path).values()}
+    _, statics, _ = readback.read(path)
+    assert statics["accuracy/local_error"]["unit"] == "rad, rad/s"
+    assert statics["accuracy/substeps"]["unit"] == "1/step"
+
+
+def test_a_scene_whose_steps_are_not_estimated_shows_no_estimate_and_says_so(tmp_path):
+    """Damping far beyond the stability planner's reach: its steps are refused and not
+    estimated (NaN); the recording has no estimate series, no empty panes, and says why."""
+    scene = load_scene("damped_release").replace(damping=1e9, duration=0.05)
+    assert math.isnan(Simulator(scene).error_estimate)
+    path = tmp_path / "unestimated.rrd"
+    record(scene, path)
+    columns = read_back(path)
+    assert "accuracy/substeps" in columns
+    assert not {"accuracy/local_error", "accuracy/accumulated_error"} & set(columns)
+    assert any(text.startswith("scene damped_release start") and "no error estimate" in text
+               for text in columns["events"]["TextLog:text"])
+    views = blueprint_tree(path)["views"]
+    queries = [query for query, _, _ in views.values() if query]
+    assert ["accuracy/local_error"] not in queries and ["accuracy/substeps"] in queries
+    assert any("no error estimate" in name for name in views)

@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from arm_sim_ros.node.ros_args import load_params_file, node_parameters, parse_ros_args
+from arm_sim_ros.node.ros_args import (load_params_file, node_identity, node_parameters,
+                                       parse_ros_args, remap_name)
 from arm_sim_ros.usage import UsageError
 
 # -p value text -> what rcl makes of it
@@ -74,6 +75,45 @@ def test_bad_parameter_files_are_one_line(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(UsageError, match=message):
         load_params_file(str(path))
+
+
+# -r rules -> (node name, namespace), as rcl_remap_node_name / rcl_remap_node_namespace read them
+IDENTITY_TABLE = [
+    ([], ("arm_sim", "/")),
+    (["__node:=left"], ("left", "/")), (["__name:=left"], ("left", "/")),
+    (["arm_sim:__node:=left"], ("left", "/")),          # a rule for this node
+    (["other:__node:=left"], ("arm_sim", "/")),         # a rule for another node
+    (["__node:=a", "__node:=b"], ("a", "/")),            # the first rule wins
+    (["__ns:=/robot/left"], ("arm_sim", "/robot/left")), (["__ns:=/robot/"], ("arm_sim", "/robot")),
+]
+
+
+@pytest.mark.parametrize("rules, identity", IDENTITY_TABLE)
+def test_node_name_and_namespace_remapping_read_as_rcl_reads_them(rules, identity):
+    name, namespace, _ = node_identity(parse_ros_args([a for r in rules for a in ("-r", r)])["remap"])
+    assert (name, namespace) == identity
+
+
+def test_a_node_name_rcl_would_refuse_is_one_line():
+    with pytest.raises(UsageError, match="a node name is letters, digits and underscores"):
+        node_identity({"__node": "9 lives"})
+
+
+# (name, rules) -> the name the node uses, in node arm_sim of namespace /ns (rcl_remap_topic_name)
+NAME_TABLE = [
+    ("joint_states", {}, "/ns/joint_states"), ("/clock", {}, "/clock"),
+    ("~/reset", {}, "/ns/arm_sim/reset"),
+    ("joint_states", {"joint_states": "js"}, "/ns/js"),        # relative both sides
+    ("joint_states", {"/ns/joint_states": "/js"}, "/js"),      # matched after expansion
+    ("~/reset", {"/ns/arm_sim/reset": "restart"}, "/ns/restart"),
+    ("~/reset", {"~/reset": "~/restart"}, "/ns/arm_sim/restart"),
+    ("joint_states", {"/joint_states": "/js"}, "/ns/joint_states"),   # another name
+]
+
+
+@pytest.mark.parametrize("name, rules, resolved", NAME_TABLE)
+def test_topic_and_service_names_are_expanded_then_remapped(name, rules, resolved):
+    assert remap_name(name, "arm_sim", "/ns", rules) == resolved
 
 
 def test_use_sim_time_true_is_refused_on_dds_and_false_is_accepted():

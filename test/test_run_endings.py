@@ -165,7 +165,9 @@ def test_progress_is_silent_for_short_work_and_a_plain_line_off_a_terminal():
     ["--step", "10", "--duration", "20"],                            # a step far too large
 ])
 def test_a_run_that_diverged_while_finite_says_so_and_exits_1(capsys, argv):
-    code = cli.main(["run", *argv, "--json"])
+    # tolerance 0: the default tolerance (physics/accuracy.py) would split these steps
+    # until they are accurate, and nothing would diverge
+    code = cli.main(["run", *argv, "--set", "tolerance=0", "--json"])
     out, err = capsys.readouterr()
     result = strict_json(out)
     assert code == 1 and "diverged" in result["fault"] and "diverged" in err

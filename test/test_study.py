@@ -1,12 +1,17 @@
 """The accuracy study: its reference reproduces the explainer, its numbers and fits are
 right, and `arm-sim accuracy` writes a table, JSON and a plot, refusing bad input."""
 import json
+import sys
 from math import isinf
 
 import pytest
 
 from arm_sim_ros.tools import cli, accuracy as study
 from arm_sim_ros.physics.scene import load_scene
+
+
+def series(result, name):
+    return [r for r in result["runs"] if r["series"] == name]
 
 
 def printed(values):
@@ -48,7 +53,7 @@ def test_reference_exercise_two_work_is_the_potential_gain():
 
 def test_study_reports_the_explainers_energy_drift_for_rk4():
     result = study.study(load_scene("release"), 2.0, ["rk4"], [0.01, 0.005], [])
-    residuals = [r["balance_residual"] for r in result["runs"]]
+    residuals = [r["balance_residual"] for r in series(result, "rk4")]
     assert [f"{x:.9f}" for x in residuals] == ["0.000145388", "0.000011084"]
 
 
@@ -57,7 +62,7 @@ def test_study_reports_the_explainers_energy_drift_for_rk4():
 def test_rk4_fitted_order_in_the_study_is_four():
     result = study.study(load_scene("release"), 0.5, ["rk4"], [0.01, 0.005, 0.0025, 0.00125], [])
     assert result["orders"]["rk4"]["fitted"] == pytest.approx(4.0, abs=0.1)
-    evaluations = [r["rhs_evaluations"] for r in result["runs"]]
+    evaluations = [r["rhs_evaluations"] for r in series(result, "rk4")]
     assert evaluations == [200, 400, 800, 1600]             # four stages per step
 
 
@@ -79,7 +84,7 @@ def test_a_diverging_run_counts_as_infinitely_wrong():
 
 def test_dopri5_runs_at_the_publish_step_for_each_tolerance():
     result = study.study(load_scene("release"), 0.5, ["dopri5"], [], [1e-6, 1e-10])
-    loose, tight = result["runs"]
+    loose, tight = series(result, "dopri5")
     assert loose["step_size"] == tight["step_size"] == 0.01
     assert tight["max_state_error"] < loose["max_state_error"]
     assert tight["rhs_evaluations"] > loose["rhs_evaluations"]
@@ -106,7 +111,8 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
     assert "fitted order rk4" in captured.out and "dopri5" in captured.out
     assert captured.err == ""                # work this short shows no progress
     data = json.loads(out_json.read_text())
-    assert {r["integrator"] for r in data["runs"]} == {"rk4", "midpoint", "dopri5"}
+    ours = {r["integrator"] for r in data["runs"] if not r["series"].startswith("mujoco")}
+    assert ours == {"rk4", "midpoint", "dopri5"}
     assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -120,6 +126,11 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
     (["--tolerances", "1e-300"], "above 1e-14"),
     (["--duration", "nan"], "positive number of seconds"),
     (["--steps", "x"], "invalid float value"),
+    (["--peers", "bullet"], "unknown peer 'bullet'; choose from mujoco or none"),
+    (["--repeat", "0"], "--repeat 0 must be at least 1"),
+    (["--tolerance-sweep", "0"], "--tolerance-sweep value 0 must be a finite number above 0"),
+    (["--scenes", "release", "no_such_scene"], "no_such_scene"),
+    (["--plot", "/nonexistent/dir/p.png"], "the directory /nonexistent/dir does not exist"),
 ])
 def test_accuracy_command_refuses_bad_input_in_one_line(argv, message, capsys):
     assert cli.main(["accuracy", *argv]) == 2
@@ -142,3 +153,128 @@ def test_the_study_runs_a_scene_with_extra_states_and_channels(capsys):
                      "--integrators", "rk4", "--steps", "0.0005", "0.00025"])
     out = capsys.readouterr().out
     assert code == 0 and "rk4" in out and "fitted order" in out
+
+
+# The price list: the tolerance setting, the effect scenes, MuJoCo side by side.
+
+def test_the_tolerance_sweep_achieved_error_falls_as_the_tolerance_tightens():
+    result = study.study(load_scene("release"), 1.0, ["rk4"], [0.01], [],
+                         sweep=[1e-3, 1e-6, 1e-9])
+    swept = [r for r in result["runs"] if r["series"] == "rk4 + tolerance"]
+    assert [r["tolerance"] for r in swept] == [1e-3, 1e-6, 1e-9]
+    achieved = [r["max_state_error"] for r in swept]
+    taken = [r["substeps"] for r in swept]
+    assert achieved[0] >= achieved[1] >= achieved[2] and achieved[2] < achieved[0] / 100
+    assert taken[0] <= taken[1] < taken[2]           # the accuracy is bought with sub-steps
+    assert all(r["step_size"] == 0.01 for r in swept)
+
+
+def test_the_tolerance_sweep_runs_exactly_where_the_steps_carry_an_estimate():
+    """A tolerance acts through the step's error estimate: where a scene's steps carry none
+    (NaN) the sweep would repeat one run, so it is left out and the study says why."""
+    scene = load_scene("stick_slip")
+    result = study.study(scene, 0.5, ["rk4"], [0.01], [], sweep=[1e-6])
+    swept = [r for r in result["runs"] if r["series"] == "rk4 + tolerance"]
+    said = any("no error estimate" in note for note in result["notes"])
+    assert (len(swept), said) == ((1, False) if study.has_estimate(scene) else (0, True))
+
+
+def test_a_scene_that_switches_modes_is_compared_with_a_reference_that_locates_switches():
+    """The study's runs of stick_slip go through Simulator.step (which locates the switches)
+    and converge to the reference at RK4's order."""
+    result = study.study(load_scene("stick_slip"), 1.0, ["rk4"], [0.01, 0.005, 0.0025], [])
+    assert "switches located" in result["reference"]
+    errors = [r["max_state_error"] for r in result["runs"] if r["series"] == "rk4"]
+    assert errors[0] > 8 * errors[1] > 64 * errors[2] and errors[2] < 1e-6
+
+
+SAME_PHYSICS = ["release", "damped_release", "springs_oscillation", "payload_release",
+                "geared_release", "shoulder_torque_no_gravity", "moving_gravity_compensation"]
+
+
+@pytest.mark.parametrize("name", SAME_PHYSICS)
+def test_mujoco_runs_beside_ours_and_its_rk4_agrees_with_ours_where_the_physics_is_the_same(name):
+    pytest.importorskip("mujoco", reason="MuJoCo is the [bench] extra: pip install '.[bench]'")
+    result = study.study(load_scene(name), 1.0, ["rk4"], [0.01, 0.005], [], peers=["mujoco"])
+    runs = {(r["series"], r["step_size"]): r for r in result["runs"]}
+    assert {s for s, _ in runs if s.startswith("mujoco")} == {
+        "mujoco Euler", "mujoco implicit", "mujoco implicitfast", "mujoco RK4"}
+    for h in (0.01, 0.005):
+        ours, theirs = runs[("rk4", h)], runs[("mujoco RK4", h)]
+        # The same scheme on the same equations: the same error against the same reference.
+        assert theirs["max_state_error"] == pytest.approx(ours["max_state_error"],
+                                                          rel=1e-6, abs=1e-12)
+        assert theirs["max_state_error"] < 1e-4 and theirs["cpu_s_per_sim_s"] > 0
+    assert "floor" not in result["peers"]["mujoco"]
+
+
+def test_mujocos_soft_friction_gives_an_error_floor_that_the_study_reports():
+    pytest.importorskip("mujoco", reason="MuJoCo is the [bench] extra: pip install '.[bench]'")
+    result = study.study(load_scene("stick_slip"), 1.0, ["rk4"], [0.01, 0.005, 0.0025], [],
+                         peers=["mujoco"])
+    mujoco = result["peers"]["mujoco"]
+    rk4 = [r["max_state_error"] for r in result["runs"] if r["series"] == "mujoco RK4"]
+    assert rk4[-1] > 0.5 * rk4[0]                    # a finer step no longer helps
+    assert mujoco["floor"] == min(r["max_state_error"] for r in result["runs"]
+                                  if r["series"].startswith("mujoco"))
+    ours = min(r["max_state_error"] for r in result["runs"] if r["series"] == "rk4")
+    assert ours < mujoco["floor"] / 1000
+    assert any("frictionloss" in note for note in mujoco["notes"])
+
+
+def test_a_scene_mujoco_cannot_express_is_named_and_the_study_goes_on():
+    pytest.importorskip("mujoco", reason="MuJoCo is the [bench] extra: pip install '.[bench]'")
+    result = study.study(load_scene("wrong_payload_model"), 0.1, ["rk4"], [0.01], [],
+                         peers=["mujoco"])
+    assert "controller_model" in result["peers"]["mujoco"]["unavailable"]
+    assert [r["series"] for r in result["runs"]] == ["rk4", "rk4 (scene as set)"]
+
+
+def test_without_mujoco_the_study_says_so_in_one_line_and_carries_on(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "mujoco", None)        # import mujoco fails
+    code = cli.main(["accuracy", "--duration", "0.1", "--integrators", "rk4", "--steps", "0.01",
+                     "--tolerance-sweep"])
+    out = capsys.readouterr().out
+    assert code == 0
+    said = [line for line in out.splitlines() if "MuJoCo is not installed" in line]
+    assert said[0].startswith("peers: ") and "pip install '.[bench]'" in said[0]
+    assert "fitted order rk4" in out and "price list" in out
+
+
+def test_without_matplotlib_a_plot_is_refused_in_one_line_before_any_work(monkeypatch, capsys,
+                                                                          tmp_path):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    code = cli.main(["accuracy", "--duration", "0.1", "--plot", str(tmp_path / "p.png")])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "--plot needs matplotlib" in err and not (tmp_path / "p.png").exists()
+
+
+def test_several_scenes_give_one_panel_each_and_a_price_list(tmp_path, capsys):
+    out_json, out_png = tmp_path / "r.json", tmp_path / "p.png"
+    code = cli.main(["accuracy", "--scenes", "release", "limit_impact", "--duration", "0.2",
+                     "--integrators", "rk4", "dopri5", "--steps", "0.01", "--tolerances", "1e-8",
+                     "--tolerance-sweep", "1e-6", "--peers", "none", "--repeat", "1",
+                     "--json", str(out_json), "--plot", str(out_png)])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert [r["scene"] for r in json.loads(out_json.read_text())["scenes"]] == [
+        "release", "limit_impact"]
+    assert "release:" in out and "limit_impact:" in out and "ours rk4 + tolerance" in out
+    assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_plot_that_cannot_be_written_is_one_line_and_leaves_nothing(tmp_path, capsys,
+                                                                      monkeypatch):
+    from arm_sim_ros.tools import accuracy_report
+
+    def full_disk(results, path):
+        open(path, "wb").write(b"partial")
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(accuracy_report, "plot", full_disk)
+    target = tmp_path / "p.png"
+    code = cli.main(["accuracy", "--duration", "0.1", "--integrators", "rk4", "--steps", "0.01",
+                     "--peers", "none", "--tolerance-sweep", "--plot", str(target)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "cannot write: No space left on device" in err[0]
+    assert not target.exists()

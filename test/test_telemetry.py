@@ -27,7 +27,12 @@ from arm_sim_ros.node import parameters as node_params
 TOL = 1e-12
 # Every scene's entities; each effect adds its own (SCENES), and an absent one adds none.
 ALWAYS = {"energy/total", "energy/balance_residual", "books/stored/kinetic", "joints/angle",
-          "joints/velocity", "arm/links", "arm/joints", "arm/tip_trace", "events"}
+          "joints/velocity", "arm/links", "arm/joints", "arm/tip_trace", "events",
+          "accuracy/substeps"}
+# ...and where the simulator estimates its steps' error (NaN: it does not):
+LOCAL, ACCUMULATED, SUBSTEPS = ("accuracy/local_error", "accuracy/accumulated_error",
+                                "accuracy/substeps")
+ESTIMATES = {LOCAL, ACCUMULATED}
 GRAVITY, WORK, TORQUE = "books/stored/gravity", "books/input/work", "joints/torque"
 KINETIC = "books/stored/kinetic"   # T − T₀: T itself for a scene that starts at rest
 WINDINGS = {"books/stored/windings", "books/transfer/work", "books/input/electrical_input",
@@ -226,7 +231,8 @@ def test_every_effect_records_its_channels_by_name_equal_to_the_core(recordings,
     lacks has no entity (no copper loss without windings, no dissipation without damping)."""
     rows, columns, _ = recordings(name)
     # (the 3D arm, arm3d/*, is test_recording_story.py's)
-    assert {e for e in columns if not e.startswith("arm3d/")} == ALWAYS | SCENES[name]
+    estimates = ESTIMATES if not math.isnan(Simulator(load_scene(name)).error_estimate) else set()
+    assert {e for e in columns if not e.startswith("arm3d/")} == ALWAYS | SCENES[name] | estimates
     assert_equals_core(columns, rows)
     sim = Simulator(load_scene(name))
     for channel in sim.channels:     # by name, whatever its kind
@@ -239,7 +245,8 @@ def test_the_books_view_sums_to_the_residual(recordings, name):
     row by row, over exactly the series the saved view shows."""
     rows, columns, path = recordings(name)
     (shown,) = [r["ViewContents:query"] for r in blueprint_rows(path).values()
-                if "energy/balance_residual" in r.get("ViewContents:query", [])]
+                if "energy/balance_residual" in r.get("ViewContents:query", [])
+                and len(r["ViewContents:query"]) > 1]   # (the trust view shows it alone)
     sign = {"stored": 1.0, "loss": 1.0, "input": -1.0}
     kinds = {p: p.split("/")[1] for p in shown if p.startswith("books/")}
     assert set(kinds.values()) <= set(sign)          # transfers are not in the books
@@ -302,7 +309,8 @@ def test_series_are_named_and_coloured(tmp_path):
             styles[chunk.entity_path.lstrip("/")] = (batch.column("SeriesLines:names")[0].as_py(),
                                                      batch.column("SeriesLines:colors")[0].as_py())
     assert set(styles) == {"energy/total", "energy/balance_residual", KINETIC, GRAVITY,
-                           "books/loss/dissipated", "joints/angle", "joints/velocity"}
+                           "books/loss/dissipated", "joints/angle", "joints/velocity",
+                           LOCAL, ACCUMULATED, SUBSTEPS}
     assert styles["books/loss/dissipated"][0] == ["loss: damping ∫d·q̇²dt"]
     assert styles["energy/total"][0] == ["total E = kinetic + gravity"]
     for names, colors in styles.values():
@@ -322,7 +330,8 @@ def test_series_names_use_only_glyphs_the_viewer_can_draw():
         snap = readouts.Snapshot(sim)
         styled = blueprint.series(snap)       # a style for each readout, none for another
         assert set(styled) == set(readouts.channel_values(snap, np.array([sim.state]),
-                                                          np.zeros((1, 2))))
+                                                          np.zeros((1, 2)))) | set(
+            readouts.accuracy_paths(snap))
         names += [n for series, _, _ in styled.values() for n in series]
         names += [blueprint.joint_series(p)[0] for p in blueprint.joint_paths(snap)]
         names += blueprint.effects_document(snap).splitlines()
@@ -618,6 +627,19 @@ def test_a_payload_grasped_mid_run_keeps_the_books_and_reads_each_row_as_taken(t
     assert np.max(np.abs(books - scalars(columns["energy/balance_residual"])[:, 0])) <= TOL
 
 
+def test_a_channel_removed_mid_run_keeps_its_booked_energy_in_the_residual(tmp_path):
+    """Damping set to 0 while it runs (the node's live `damping`) removes the dissipated
+    channel; the loss already booked stays in the residual, as in the simulator's."""
+    scene = load_scene("damped_release").replace(duration=0.4)
+    path = tmp_path / "undamped.rrd"
+    rows, _ = record(scene, path, on_step=lambda sim, k: k == 20 and sim.change_scene(
+        sim.scene.replace(damping=0.0)))
+    columns = read_back(path)
+    assert_equals_core(columns, rows)
+    residual = scalars(columns["energy/balance_residual"])[:, 0]
+    assert len(residual) == 41 and np.max(np.abs(residual)) < 1e-5
+
+
 def test_the_recording_verifies(tmp_path):
     viewer = Path(rr.__file__).parent.parent / "rerun_cli" / "rerun"
     if not viewer.is_file():
@@ -718,9 +740,12 @@ class StepSpy:
 class BatchSpy(StepSpy):
     """A recorder with step_batch: the states of many steps in one call."""
 
-    def step_batch(self, sim, states):
+    books_every = 3
+
+    def step_batch(self, sim, states, books=()):
         self.seen += range(sim.steps - len(states) + 1, sim.steps + 1)
         self.states = getattr(self, "states", []) + list(states)
+        self.books = getattr(self, "books", []) + list(books)
 
 
 def test_arm_sim_runs_loop_gives_every_step_to_either_protocol(monkeypatch):
@@ -731,10 +756,13 @@ def test_arm_sim_runs_loop_gives_every_step_to_either_protocol(monkeypatch):
         recorder.start(sim)
     drift = cli.run_recorded(sim, 0.5, [per_step, batched])
     reference = Simulator(scene)
-    states = []
-    assert drift == reference.run(0.5, lambda s: states.append(s.state))
+    states, books = [], []
+    assert drift == reference.run(0.5, lambda s: (states.append(s.state), books.extend(
+        (s.steps, s.error_estimate, s.accumulated_error, s.substeps_taken))))
     assert per_step.seen == batched.seen == list(range(51))
     assert batched.states == states
+    # every books_every-th step's error books, as the simulator had them after it
+    assert batched.books == [v for k in range(3, 51, 3) for v in books[4 * k - 4:4 * k]]
     assert cli.run_recorded(sim, 0.0, [batched]) == 0.0 and len(batched.seen) == 51
 
 
@@ -796,3 +824,119 @@ def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
     assert np.all(np.isfinite(scalars(columns["joints/velocity"])))
     assert any(text.startswith("integration not finite")
                for text in columns["events"]["TextLog:text"])
+
+
+# --- the error books: how far each step may be off, and what holding it cost -------------
+
+def spin(h, tolerance=2e-3, duration=0.5):
+    """100 rad/s about the shoulder, elbow bent 0.5 rad, gravity off: a tolerance splits
+    its steps (physics/accuracy.py)."""
+    return load_scene("release").replace(initial_positions=(0.0, 0.5), gravity=0.0,
+                                         initial_velocities=(100.0, 0.0), step_size=h,
+                                         tolerance=tolerance, duration=duration)
+
+
+def books_of(scene, steps):
+    """{step: (error_estimate, accumulated_error, sub-steps the step took)} of a Simulator
+    run; sub-steps: the growth of substeps_taken, which counts split steps only (0: a
+    plain step, one sub-step)."""
+    sim, out, taken = Simulator(scene), {}, 0
+    for _ in range(steps):
+        sim.step()
+        grown, taken = sim.substeps_taken - taken, sim.substeps_taken
+        out[sim.steps] = (sim.error_estimate, sim.accumulated_error, grown or 1)
+    return out
+
+
+@pytest.mark.parametrize("tolerance", [2e-3, 0.0])
+def test_every_steps_error_books_are_recorded_as_the_simulator_has_them(tmp_path, tolerance):
+    """recorder.step(sim) after every step: each step's local error estimate, the sum of
+    them and the sub-steps it took, at its own simulated time, exactly."""
+    scene = spin(0.01, tolerance)
+    record(scene, tmp_path / "spin.rrd")
+    columns, expected = read_back(tmp_path / "spin.rrd"), books_of(scene, 50)
+    for path, k in ((LOCAL, 0), (ACCUMULATED, 1), (SUBSTEPS, 2)):
+        assert columns[path]["sim_time"] == [s * 10_000_000 for s in range(1, 51)], path
+        assert scalars(columns[path])[:, 0].tolist() == [expected[s][k] for s in range(1, 51)]
+    substeps = scalars(columns[SUBSTEPS])[:, 0]
+    if tolerance:        # the spin's steps are split to meet 2e-3 per s
+        assert substeps.max() > 1
+    else:                # estimate only: plain steps, each with a larger error
+        assert set(substeps) == {1.0}
+        split = books_of(spin(0.01), 50)
+        assert scalars(columns[LOCAL]).max() > max(v[0] for v in split.values())
+
+
+def test_arm_sim_run_samples_the_error_books_every_few_steps_exactly(tmp_path, capsys):
+    """arm-sim run hands steps over in batches: the books of every BOOKS_EVERY-th step and
+    of each batch's last, as the simulator had them; a sample's sub-steps stand for the
+    steps since the one before: exact where the count held, between its values where it
+    changed."""
+    path = tmp_path / "spin.rrd"
+    assert cli.main(["run", "--set", "initial_positions=0,0.5", "--set", "gravity=0",
+                     "--set", "initial_velocities=100,0", "--set", "tolerance=0.002",
+                     "--duration", "1", "--rerun", str(path)]) == 0
+    capsys.readouterr()
+    columns, expected = read_back(path), books_of(spin(0.01), 100)
+    steps = [round(t / 10_000_000) for t in columns[LOCAL]["sim_time"]]
+    every = telemetry.BOOKS_EVERY
+    assert set(range(every, 101, every)) <= set(steps) and steps[-1] == 100
+    assert len(steps) < 100                                   # sampled, not every step
+    for entity, k in ((LOCAL, 0), (ACCUMULATED, 1)):
+        assert columns[entity]["sim_time"] == columns[LOCAL]["sim_time"]
+        assert scalars(columns[entity])[:, 0].tolist() == [expected[s][k] for s in steps]
+    before, split = 0, 0
+    for step, value in zip(steps, scalars(columns[SUBSTEPS])[:, 0]):
+        span = [expected[s][2] for s in range(before + 1, step + 1)]
+        assert min(span) <= value <= max(span), (step, value, span)
+        if min(span) == max(span):
+            assert value == span[0]
+        split += value > 1
+        before = step
+    assert split > len(steps) // 2
+
+
+def test_the_node_records_its_error_books_and_each_ticks_sub_steps(tmp_path):
+    """The node samples the books as arm-sim run does; a tick's sub-steps are its steps':
+    exactly steps x the count while it holds (a fast spin under a tolerance)."""
+    node_core = pytest.importorskip("arm_sim_ros.node.core")
+    path = tmp_path / "spin_node.rrd"
+    config = node_params.resolve_parameters({
+        "scene": "release", "gravity": 0.0, "initial_positions": [0.0, 0.5],
+        "initial_velocities": [100.0, 0.0], "tolerance": 2e-3, "step_size": 0.002,
+        "publish_rate": 100.0, "rerun_path": str(path)})
+    assert config.steps_per_tick == 5
+    run_node(node_core, config, ticks=30)
+    columns = read_back(path)
+    expected = books_of(config.scene, 150)
+    steps = [round(t / 2_000_000) for t in columns[LOCAL]["sim_time"]]
+    assert set(range(telemetry.BOOKS_EVERY, 151, telemetry.BOOKS_EVERY)) <= set(steps)
+    assert scalars(columns[ACCUMULATED])[:, 0].tolist() == [expected[s][1] for s in steps]
+    ticks = scalars(columns["node/substeps"])[:, 0]
+    assert len(ticks) == 30
+    for k, value in enumerate(ticks):
+        near = [expected[s][2] for s in range(max(1, 5 * k - 7), 5 * k + 6)]  # + a span before
+        own = [expected[s][2] for s in range(5 * k + 1, 5 * k + 6)]
+        if min(near) == max(near):
+            assert value == sum(own), k
+        assert 5 * min(near) <= value <= 5 * max(near), k
+    assert ticks[-1] >= 5 * 2                     # the tolerance splits every step
+
+
+def test_arm_sim_runs_simulator_events_land_on_the_step_they_came_in(tmp_path, capsys):
+    """arm-sim run hands a chunk of steps over after taking them; an event from inside the
+    chunk (a joint limit's switch, sub-stepping) still lands on its own step, the one after
+    event.t, beside the series it explains."""
+    path = tmp_path / "impact.rrd"
+    assert cli.main(["run", "--scene", "limit_impact", "--duration", "1.5",
+                     "--rerun", str(path)]) == 0
+    capsys.readouterr()
+    reference = Simulator(load_scene("limit_impact"))
+    reference.run(1.5)
+    h = reference.step_size
+    expected = [(round(e.t / h + 1) * round(h * 1e9), f"{e.kind}: {e.message}")
+                for e in reference.events]
+    assert len(expected) > 3 and expected[0][0] > 0.5e9        # inside later chunks
+    events = read_back(path)["events"]
+    assert [(t, text) for t, text in zip(events["sim_time"], events["TextLog:text"])
+            if not text.startswith("scene ")] == expected

@@ -16,9 +16,9 @@ from ..interface import NODE_NAME
 from ..physics.simulator import Simulator
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
-from .parameters import SCENE_PARAMETERS, SPECS, NodeConfig
+from .parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .recorder_link import RecorderLink, make_recorder
-from .status import health, status_line
+from .status import Interval, health, status_line
 
 
 class ArmSimCore:
@@ -56,10 +56,8 @@ class ArmSimCore:
         self.held = False                   # integration left the finite numbers; holding
         self.max_abs_residual = 0.0
         self._last_tick_wall = None
-        self._diag_wall = self.wall_clock()
-        self._diag_time = self.sim.time
-        self._refused_at_last_diag = self.refused_commands
-        self._late_at_last_diag = self.late_ticks
+        self.interval = Interval(self.wall_clock(), self.sim.time, self.refused_commands,
+                                 self.late_ticks)
 
     def _on_sim_event(self, event) -> None:
         """What the simulator does later (a driver saturating...) reaches the log as it
@@ -71,16 +69,16 @@ class ArmSimCore:
 
     def set_parameters(self, changes: dict) -> list:
         """Apply runtime parameter changes; ParameterRefused leaves everything as it was.
-        Returns the names whose value changed. A change to the physics restarts the scene."""
+        Returns the names whose value changed. A change to the arm, the policy or the
+        integration restarts the scene; one to a live effect (LIVE) carries on from now."""
         config = self.config.with_changes(changes)
         changed = [n for n in SPECS if config.values[n] != self.config.values[n]]
-        if any(n in SCENE_PARAMETERS for n in changed):
+        if any(n in SCENE_PARAMETERS and n not in LIVE for n in changed):
             self._restart(config, f"parameters {', '.join(changed)} changed: scene restarted "
                                   "from its initial state")
         else:
             self.config = config
-            if "payload_mass" in changed:
-                self._set_payload(config.values["payload_mass"])
+            self._change_physics([n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder.finish()
             self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim,
@@ -118,13 +116,19 @@ class ArmSimCore:
         self.recorder.hand_over()
         self.sim.set_command(tau1, tau2)
 
-    def _set_payload(self, mass: float) -> None:
-        """Grasp or release now; the steps before it reach the recorder first."""
+    def _change_physics(self, names: list) -> None:
+        """Live effects changed: the new physics from the next step, state and books carried
+        over; the steps before reach the recorder first, and it learns the new channels."""
+        if not names:
+            return
         self.recorder.hand_over()
-        self.sim.set_payload(mass)
-        self.recorder.start(self.sim)       # the recorder learns the new channels
-        self._event(f"payload {mass:g} kg: {'grasped' if mass else 'released'}; "
-                    "the energy that changed hands is booked in payload_exchange")
+        if "payload.mass" in names:         # grasp (momentum kept) or release (velocity kept)
+            self.sim.set_payload(self.config.values["payload.mass"] or 0.0)
+        if names != ["payload.mass"]:
+            self.sim.change_scene(self.config.scene.replace(payload=self.sim.scene.payload))
+        self.recorder.start(self.sim)
+        self._event(f"{', '.join(names)} changed at t = {self.sim.time:.6f} s: the motion "
+                    "carries on from the current state (a payload's energy: payload_exchange)")
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
@@ -199,18 +203,14 @@ class ArmSimCore:
         self.recorder.finish()
 
     def real_time_factor(self, wall_now: float) -> float:
-        wall = wall_now - self._diag_wall
-        return (self.sim.time - self._diag_time) / wall if wall > 0 else 0.0
+        return self.interval.real_time_factor(wall_now, self.sim.time)
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
         sub-steps and refused steps. Rates are over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
-        rtf = self.real_time_factor(wall_now)
-        new_refused = self.refused_commands - self._refused_at_last_diag
-        new_late = self.late_ticks - self._late_at_last_diag
-        self._diag_wall, self._diag_time = wall_now, self.sim.time
-        self._refused_at_last_diag, self._late_at_last_diag = self.refused_commands, self.late_ticks
+        rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
+                                                         self.refused_commands, self.late_ticks)
         level, message = health(self.held, new_refused, new_late)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,

@@ -20,9 +20,9 @@ from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
 from ..usage import ArgumentParser, UsageError, one_line
-from .parameters import PARAMETERS, ParameterRefused
-from .ros_args import (LOG_LEVELS, load_params_file, node_parameters, parse_ros_args,  # noqa: F401
-                       split_ros_args)
+from .parameters import PARAMETERS, ParameterRefused, when_changed
+from .ros_args import (LOG_LEVELS, load_params_file, node_identity,  # noqa: F401
+                       node_parameters, parse_ros_args, split_ros_args)
 
 LEVELS = dict(zip(LOG_LEVELS, (logging.DEBUG, logging.INFO, logging.WARNING, logging.WARNING,
                                logging.ERROR, logging.CRITICAL)))
@@ -49,11 +49,10 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
 
     ros = parse_ros_args(ros_argv)
     configure_logging(ros["level"])
-    name = ros["remap"].pop("__node", ros["remap"].pop("__name", NODE_NAME))
-    namespace = "/" + ros["remap"].pop("__ns", "/").strip("/")
+    name, namespace, rules = node_identity(ros["remap"], NODE_NAME)
     try:
         node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name,
-                             namespace=namespace, remap=ros["remap"])
+                             namespace=namespace, remap=rules)
     except DiscoveryError as error:
         raise UsageError(str(error)) from None
     try:
@@ -64,7 +63,7 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
 
 
 ROS_TYPES = {"float": "double", "str": "string", "bool": "bool", "float_pair": "double[2]",
-             "float_or_pair": "double or double[2]", "str_list": "string[]"}
+             "float_or_pair": "double[1|2]", "str_list": "string[]"}
 
 
 def parameter_help() -> str:
@@ -75,13 +74,18 @@ def parameter_help() -> str:
     lines = ["parameters (--ros-args -p NAME:=VALUE, or --params-file FILE with "
              "arm_sim: ros__parameters: NAME: VALUE;",
              "scene-derived defaults are those of scene release; `ros2 param set` changes "
-             "them while it runs):"]
+             "them while it runs, as the last column says;",
+             "an effect's keys are named as in a scene file, effect.key; an effect no key "
+             "names is absent):"]
     for spec in PARAMETERS:
-        default = defaults[spec.name]
-        lines.append(f"  {spec.name:<20} {ROS_TYPES[spec.kind]:<20} default {default!r}")
+        default = "not set" if defaults[spec.name] is None else f"{defaults[spec.name]!r}"
+        lines.append(f"  {spec.name:<30} {ROS_TYPES[spec.kind]:<11} {default:<26} "
+                     f"{when_changed(spec.name)}")
         lines.append(f"      {spec.description}")
     lines.append("example: arm_sim_node --ros-args -p scene:=damped_release "
                  "-p publish_rate:=50.0 -p rerun_path:=arm.rrd")
+    lines.append("         arm_sim_node --ros-args -p friction.coulomb:=[0.5,0.1] "
+                 "-p effort_limits:=[15.0,10.0]")
     return "\n".join(lines)
 
 

@@ -7,8 +7,10 @@ The answers are the ones rclpy's ParameterService gives for the rclpy transport'
 get, describe or get-types naming an unknown parameter answers with an empty list; set
 applies each parameter on its own, set-atomically all or nothing; `scene` is read-only;
 every other parameter is dynamically typed (an integer is a fine double: the node core
-checks every value and refuses with a reason, changing nothing). A successful set
-publishes a parameter event listing the parameters set, with the values the node now holds.
+checks every value and refuses with a reason, changing nothing); an effect's key the scene
+does not name is declared NOT_SET, as rclpy declares a dynamically typed parameter without
+a value. A successful set publishes a parameter event listing the parameters set, with the
+values the node now holds.
 """
 from __future__ import annotations
 
@@ -45,8 +47,10 @@ class SetResult:
 
 def parameter_type(name: str, value) -> int:
     """The ParameterType a value of the node's parameter `name` is served as; a damping given
-    as one number is a double, as a pair a double array."""
+    as one number is a double, as a pair a double array; an effect key not set is NOT_SET."""
     kind = SPECS[name].kind
+    if value is None:
+        return NOT_SET
     if kind == "float_or_pair":
         return DOUBLE if isinstance(value, (int, float)) else DOUBLE_ARRAY
     return KIND_TYPES[kind]
@@ -129,9 +133,3 @@ class ParameterServices:
         """std_srvs/srv/Trigger on ~/reset: (success, message), as the rclpy transport says it."""
         self.core.reset()
         return True, f"scene {self.core.config.scene.name} restarted from its initial state"
-
-
-def node_full_name(name: str, namespace: str) -> str:
-    """`/arm_sim`, or `/robot/arm_sim` in namespace `/robot` (ParameterEvent.node, service
-    names)."""
-    return namespace.rstrip("/") + "/" + name

@@ -8,6 +8,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
+from ..physics.effects import MAPPING_EFFECTS, EffortLimits
+from ..physics.effects.base import REQUIRED
+from ..physics import urdf
 from ..physics.model import ParameterError
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
@@ -29,6 +32,7 @@ class ParameterSpec:
     default: object        # a value, or a function scene -> value for scene-derived defaults
     description: str
     scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
+    effect: object = None       # an effect's key: the physics Parameter that checks it
 
     def default_for(self, scene: Scene):
         return self.default(scene) if callable(self.default) else self.default
@@ -48,17 +52,58 @@ def _scene_spec(name, kind, description, default=None):
     return ParameterSpec(name, kind, default or _from_scene(name), description, scene_field=True)
 
 
+# Effects whose keys change while the node runs: the physics is rebuilt from the next step
+# with the state and energy books carried over (none of them stores energy; a payload books
+# what changes hands in payload_exchange). The other effects' keys are start-only.
+LIVE_EFFECTS = ("effort_limits", "friction", "controller_model", "payload")
+START_ONLY_WHY = {
+    "motors": "the rotor inertia is in the mass matrix and the winding currents in the state",
+    "springs": "a spring's stored energy would change with nothing to book it",
+    "joint_limits": "the arm may stand beyond a new limit",
+}
+
+
+def _effect_value(effect: str, key: str | None):
+    """scene -> its value of `effect.key` (the pair of effort_limits when key is None), None
+    where the scene does not name it."""
+    def value(scene):
+        named = getattr(scene, effect)
+        named = named if key is None or named is None else named.get(key)
+        return list(named) if isinstance(named, tuple) else named
+    return value
+
+
+def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
+    default = parameter.default
+    unset = (f"; not set: no {effect}" if default is REQUIRED else "" if default is None
+             else f"; not set: {list(default) if isinstance(default, tuple) else default}")
+    when = "changes live" if effect in LIVE_EFFECTS else "chosen at start"
+    return ParameterSpec(
+        effect if key is None else f"{effect}.{key}",
+        "float_pair" if parameter.kind == "pair" else "float", _effect_value(effect, key),
+        f"{parameter.description}, {parameter.unit}{unset} ({when})",
+        scene_field=True, effect=parameter)
+
+
+# One parameter per scene key of every effect, named and checked as the scene file names and
+# checks it (`friction.coulomb`); generated from the effects' own key lists.
+EFFECT_PARAMETERS = (_effect_spec("effort_limits", None, EffortLimits.parameter),) + tuple(
+    _effect_spec(effect, p.name, p) for effect, kind in MAPPING_EFFECTS.items()
+    for p in kind.parameters)
+
+
 # Every parameter of the node, in one place. Scene-derived defaults come from `scene`.
 PARAMETERS = (
     ParameterSpec("scene", "str", "release", "preset scene (config/scenes); chosen at start"),
+    ParameterSpec("robot_description", "str", "", "URDF of a planar 2R arm: its link lengths, "
+                  "masses, inertias, limits, damping, friction and joint names replace the "
+                  "scene's (\"\" = the scene's arm); chosen at start"),
     _scene_spec("policy", "str", "torque policy: command, command_gravity_compensation, zero, "
                 "constant, gravity_compensation, frozen_gravity", _node_policy),
     _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
     _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
     _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)"),
-    ParameterSpec("payload_mass", "float", lambda scene: scene.payload["mass"] if scene.payload
-                  else 0.0, "kg at the tip of link 2; a change at run time grasps (momentum "
-                  "kept) or releases (velocity kept) without a restart"),
+    *EFFECT_PARAMETERS,
     _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
     _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
     _scene_spec("link_lengths", "float_pair", "[l1, l2] m"),
@@ -94,9 +139,28 @@ PARAMETERS = (
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
 )
-START_ONLY = ("scene", "joint_states_topic", "joint_commands_topic")   # fixed once running
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
+# Physics that changes while it runs without a restart: the state and the books carry over.
+LIVE = ("damping",) + tuple(s.name for s in EFFECT_PARAMETERS
+                            if s.name.partition(".")[0] in LIVE_EFFECTS)
+START_ONLY = ("scene", "robot_description", "joint_states_topic",   # fixed once running
+              "joint_commands_topic") + tuple(
+    s.name for s in EFFECT_PARAMETERS if s.name.partition(".")[0] not in LIVE_EFFECTS)
+EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFECT_PARAMETERS
+                               if s.name.startswith(effect + "."))
+                 for effect in MAPPING_EFFECTS}     # mapping effect -> (parameter, key) pairs
+
+
+def when_changed(name: str) -> str:
+    """What setting `name` while the node runs does."""
+    if name in START_ONLY:
+        return "start only"
+    if name in LIVE:
+        return "live, state kept"
+    return "live, restarts the scene" if name in SCENE_PARAMETERS else "live"
+
+
 SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
                "float_or_pair": "float_or_pair"}
 
@@ -105,6 +169,16 @@ def coerce(spec: ParameterSpec, value):
     """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
     checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
     kind, name = spec.kind, spec.name
+    if spec.effect is not None:
+        # not set: the effect's default, or no effect at all. `ros2 param dump` writes a
+        # parameter not set as YAML null, which rcl reads back as the text "null".
+        if value is None or value == "null":
+            return None
+        try:
+            value = spec.effect.coerce(name.partition(".")[0], value)
+        except ParameterError as error:
+            raise ParameterRefused(name, str(error)) from None
+        return list(value) if isinstance(value, tuple) else value
     if kind in SCENE_KINDS:
         try:
             value = coerce_value(name, SCENE_KINDS[kind], value)
@@ -148,28 +222,47 @@ class NodeConfig:
 
     def with_changes(self, changes: dict) -> "NodeConfig":
         """A new config with `changes` applied, or ParameterRefused with nothing changed."""
+        _check_known(changes)
         for name in START_ONLY:
-            if name in changes and changes[name] != self.values[name]:
-                raise ParameterRefused(name, f"{name} is chosen at start; restart the node "
+            # compared as taken: [100, 50] or a rclpy array is the pair [100.0, 50.0]
+            if name in changes and coerce(SPECS[name], changes[name]) != self.values[name]:
+                why = START_ONLY_WHY.get(name.partition(".")[0], "it is chosen at start")
+                raise ParameterRefused(name, f"{name} is start-only ({why}); restart the node "
                                        f"with -p {name}:=VALUE")
         return _build(self.values | changes, load=lambda name: self.scene, changed=list(changes))
 
 
 def resolve_parameters(overrides: dict) -> NodeConfig:
-    """Defaults from the scene named by `scene`, then `overrides`; every value validated."""
-    unknown = sorted(set(overrides) - set(SPECS))
+    """Defaults from the scene named by `scene` (read through `robot_description` when one is
+    given), then `overrides`; every value validated."""
+    _check_known(overrides)
+    values = scene_defaults(*(coerce(SPECS[name], overrides.get(name, SPECS[name].default))
+                              for name in ("scene", "robot_description")))
+    scene = _base_scene(values["scene"], values["robot_description"])
+    return _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
+
+
+def _check_known(names) -> None:
+    unknown = sorted(set(names) - set(SPECS))
     if unknown:
         raise ParameterRefused(unknown[0], f"unknown parameter; known: {', '.join(SPECS)}")
-    name = coerce(SPECS["scene"], overrides.get("scene", SPECS["scene"].default))
-    scene = _load(name)
-    values = {spec.name: spec.default_for(scene) for spec in PARAMETERS} | dict(overrides)
-    return _build(values, load=lambda _: scene, changed=list(overrides))
 
 
-def scene_defaults(scene_name: str) -> dict:
-    """Every parameter's default for a scene (what a transport declares)."""
+def scene_defaults(scene_name: str, robot_description: str = "") -> dict:
+    """Every parameter's default for a scene and URDF (what a transport declares)."""
+    scene = _base_scene(scene_name, robot_description)
+    names = {"joint_names": list(urdf.read_urdf(robot_description).joint_names)
+             } if robot_description else {}
+    return ({spec.name: spec.default_for(scene) for spec in PARAMETERS} | names
+            | {"scene": scene_name, "robot_description": robot_description})
+
+
+def _base_scene(scene_name: str, robot_description: str) -> Scene:
     scene = _load(scene_name)
-    return {spec.name: spec.default_for(scene) for spec in PARAMETERS} | {"scene": scene_name}
+    try:
+        return urdf.scene_from_urdf(robot_description, scene) if robot_description else scene
+    except SceneError as error:
+        raise ParameterRefused("robot_description", str(error)) from None
 
 
 def _load(name: str) -> Scene:
@@ -183,9 +276,9 @@ def _build(values: dict, load, changed) -> NodeConfig:
     values = {name: coerce(SPECS[name], values[name]) for name in SPECS}
     base = load(values["scene"])
     scene_values = {name: values[name] for name in SCENE_PARAMETERS if name in FIELD_KINDS}
-    mass = values["payload_mass"]
-    if mass != (base.payload["mass"] if base.payload else 0.0):
-        scene_values["payload"] = {"mass": mass} if mass > 0 else None
+    for effect, keys in EFFECT_GROUPS.items():   # a key not set leaves it to the effect
+        scene_values[effect] = {key: values[name] for name, key in keys
+                                if values[name] is not None} or None
     try:
         scene = base.replace(**scene_values)
     except (SceneError, ParameterError) as error:
@@ -195,10 +288,17 @@ def _build(values: dict, load, changed) -> NodeConfig:
 
 
 def _blamed(message: str, changed) -> str:
-    """The parameter a scene error is about: the one it names, else the first one changed."""
-    for name in SCENE_PARAMETERS:
-        if name in message:
-            return name
+    """The parameter a scene error is about: of those it names, one just changed (the longest
+    name: `joint_limits.damping` rather than `damping`); else a key just changed of an effect
+    it names (`friction.static` when friction.coulomb is missing); else the first named or
+    changed."""
+    named = [name for name in SCENE_PARAMETERS if name in message]
+    effects = {name.partition(".")[0] for name in named}
+    for pool in ([n for n in named if n in changed],
+                 [n for n in changed if n in SCENE_PARAMETERS and n.partition(".")[0] in effects],
+                 named):
+        if pool:
+            return max(pool, key=len)
     return next((n for n in changed if n in SCENE_PARAMETERS), "scene")
 
 
@@ -209,7 +309,6 @@ def _check_node_values(values: dict) -> None:
          "must be >= 0 (0 = as fast as possible)"),
         ("command_timeout", values["command_timeout"] >= 0, "must be >= 0 (0 = hold forever)"),
         ("torque_limit", values["torque_limit"] > 0, "must be positive (N m)"),
-        ("payload_mass", values["payload_mass"] >= 0, "must be >= 0 (kg; 0 = no payload)"),
         ("joint_names", len(values["joint_names"]) == 2, "needs exactly two names"),
     )
     for name, ok, reason in checks:

@@ -2,11 +2,14 @@
 in order after them, and a recorder that fails dropped with one error line (telemetry must
 never stop the simulation).
 
-The node's story goes with the steps, one row per tick (recorders with `node_ticks`): the
-commands refused during the tick, whether it came late, the real-time factor and its
-sub-steps: a tuple per tick here, the numbers worked out in the recorder's sender thread
-(recording/story.py). The recorder
-learns the stamp origin (`for_node`) so that its ros_time timeline is the JointState stamps.
+Every `books_every`-th step (the recorder's) goes with its error books (the simulator's
+error_estimate, accumulated_error and substeps_taken after it), so the recording shows how
+far the steps may be off and what they cost. The node's story goes with the steps, one row
+per tick (recorders with `node_ticks`): the commands refused during the tick, whether it
+came late, the real-time factor and its sub-steps (those of its steps): a tuple per tick
+here, the numbers worked out in the recorder's sender thread (recording/story.py). The
+recorder learns the stamp origin (`for_node`) so that its ros_time timeline is the
+JointState stamps.
 """
 from __future__ import annotations
 
@@ -35,6 +38,8 @@ class RecorderLink:
     def __init__(self, log, recorder, sim, stamp_origin_ns: int | None = None):
         self.log, self.recorder, self.sim = log, recorder, sim
         self._unrecorded = []             # states of steps the recorder has not seen yet
+        self._books = []                  # error books of some of them (step_batch's `books`)
+        self._books_every = getattr(recorder, "books_every", 0)   # 0: none
         self._ticks = []                  # (sim.steps, story values) of those steps' ticks
         self._refused = 0                 # commands refused since the last tick
         self.stamp_origin_ns = stamp_origin_ns
@@ -71,8 +76,9 @@ class RecorderLink:
 
     def step(self, steps: int, wall_now: float | None = None,
              late_ticks: int | None = None) -> None:
-        """One tick's `steps` physics steps, each seen by the recorder: their states
-        collected and handed over in one step_batch(sim, states) call per RECORD_EVERY steps
+        """One tick's `steps` physics steps, each seen by the recorder: their states (and
+        every books_every-th step's error books) collected and handed over in one
+        step_batch(sim, states, books) call per RECORD_EVERY steps
         when it has one (a Python call per step, or per tick at one step a tick, costs more
         than logging's 10 % budget), else step(sim) after every step. `wall_now` (the core's
         clock at the tick; default time.monotonic()) and `late_ticks` (the core's count;
@@ -85,10 +91,13 @@ class RecorderLink:
             for _ in range(steps):
                 advance()
         elif hasattr(recorder, "step_batch"):
-            keep = self._unrecorded.append
+            keep, book, every = self._unrecorded.append, self._books.extend, self._books_every
             for _ in range(steps):
                 advance()
                 keep(sim.state)
+                if every and sim.steps % every == 0:
+                    book((sim.steps, sim.error_estimate, sim.accumulated_error,
+                          sim.substeps_taken))
             if len(self._unrecorded) >= RECORD_EVERY:
                 self.hand_over()
         else:
@@ -100,14 +109,15 @@ class RecorderLink:
         """The tick's story, kept with its steps (which come next) as noted: story.TickStory."""
         sim = self.sim
         self._ticks.append((sim.steps + steps, (wall, late_ticks, self._refused, steps,
-                                                sim.step_size, sim.substeps)))
+                                                sim.step_size)))
         self._refused = 0
 
     def hand_over(self) -> None:
         states, self._unrecorded = self._unrecorded, []
+        books, self._books = self._books, []
         ticks, self._ticks = self._ticks, []
         if states:
-            self.call("step_batch", self.sim, states)
+            self.call("step_batch", self.sim, states, books)
         if ticks and states:
             self.call("node_ticks", self.sim, ticks)
 

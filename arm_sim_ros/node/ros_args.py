@@ -129,7 +129,7 @@ def parse_ros_args(ros: list) -> dict:
             assignments.append(("file", value))
         elif flag in ("-r", "--remap"):
             source, target = _assignment(flag, value)
-            remap[source] = target
+            remap.setdefault(source, target)      # rcl: the first rule that matches wins
         else:
             level = value.rsplit(":=", 1)[-1].lower()
             if level not in LOG_LEVELS:
@@ -190,7 +190,47 @@ def _node_sections(mapping, what: str, prefix: str = ""):
 
 
 def full_node_name(node_name: str = NODE_NAME, namespace: str = "/") -> str:
+    """`/arm_sim`, or `/robot/arm_sim` in namespace `/robot`."""
     return namespace.rstrip("/") + "/" + node_name
+
+
+NODE_NAME_RULE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def node_identity(remap: dict, node_name: str = NODE_NAME) -> tuple[str, str, dict]:
+    """(node name, namespace, the name remapping rules) of `-r` rules as rcl reads them:
+    `__node:=` (or `__name:=`) renames the node, `__ns:=` moves it; a rule prefixed with a
+    node name (`arm_sim:__node:=other`, `arm_sim:joint_states:=js`) is for that node only."""
+    rules = {}
+    for source, target in remap.items():
+        node, colon, rule = source.rpartition(":")
+        if not colon or node == node_name:
+            rules.setdefault(rule, target)
+    name = rules.pop("__node", rules.pop("__name", node_name))
+    rules.pop("__name", None)
+    namespace = "/" + rules.pop("__ns", "/").strip("/")
+    if not NODE_NAME_RULE.fullmatch(name):
+        raise UsageError(f"-r __node:={name!r}: a node name is letters, digits and underscores, "
+                         "not starting with a digit")
+    return name, namespace, rules
+
+
+def expand_name(name: str, node_name: str, namespace: str) -> str:
+    """rcl_expand_topic_name: `~` is the node's full name, a relative name goes in the
+    namespace, an absolute one stays."""
+    if name == "~" or name.startswith("~/"):
+        return full_node_name(node_name, namespace) + name[1:]
+    return name if name.startswith("/") else namespace.rstrip("/") + "/" + name
+
+
+def remap_name(name: str, node_name: str, namespace: str, rules: dict | None = None) -> str:
+    """A topic or service name, expanded, after the first `-r` rule whose source expands to
+    the same name (rcl_remap_topic_name / rcl_remap_service_name)."""
+    expanded = expand_name(name, node_name, namespace)
+    for source, target in (rules or {}).items():
+        if expand_name(source, node_name, namespace) == expanded:
+            return expand_name(target, node_name, namespace)
+    return expanded
 
 
 def load_params_file(path: str, node_name: str = NODE_NAME, namespace: str = "/") -> dict:

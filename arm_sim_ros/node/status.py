@@ -5,6 +5,26 @@ from __future__ import annotations
 from ..interface import ERROR, OK, WARN
 
 
+class Interval:
+    """What changed since the previous 1 Hz status: simulated and wall time, refused commands,
+    late ticks."""
+
+    def __init__(self, wall: float, sim_time: float, refused: int, late: int):
+        self.wall, self.sim_time, self.refused, self.late = wall, sim_time, refused, late
+
+    def real_time_factor(self, wall_now: float, sim_time: float) -> float:
+        wall = wall_now - self.wall
+        return (sim_time - self.sim_time) / wall if wall > 0 else 0.0
+
+    def close(self, wall_now: float, sim_time: float, refused: int, late: int) -> tuple:
+        """(real-time factor, new refused commands, new late ticks) over the interval, which
+        ends now; the next one starts."""
+        closed = (self.real_time_factor(wall_now, sim_time), refused - self.refused,
+                  late - self.late)
+        self.__init__(wall_now, sim_time, refused, late)
+        return closed
+
+
 def health(held: bool, new_refused: int, new_late: int) -> tuple[int, str]:
     """(diagnostic level, message) over the interval since the previous status."""
     if held:

@@ -79,6 +79,7 @@ class Switching:
             self.engaged_rate = ratio
         self.clamps = Clamps.of(dynamics)  # effort, voltage clamps of a state-dependent request
         self.locate = True                # False: switch at sub-step ends (first order)
+        self.checked = None               # advance, estimated (accuracy.py), or None
         self._functions, self.mode, self._last = {}, None, None
 
     def reset(self) -> Counter:
@@ -104,21 +105,6 @@ class Switching:
         return mode if self.clamps is None else self.clamps.found(
             y[:self.width], mode, lambda m: self.functions(m)[4])
 
-    def initial_mode(self, y) -> tuple:
-        codes, zones = [], [0, 0]
-        for i in (0, 1):
-            q, u, code = y[i], y[2 + i], "free"
-            if self.friction is not None:
-                code = "+" if u > 0 else "-" if u < 0 else "stuck"
-            if self.hard and u == 0.0 and q >= self.limits.upper[i]:
-                code = "upper"
-            elif self.hard and u == 0.0 and q <= self.limits.lower[i]:
-                code = "lower"
-            elif self.limits is not None and not self.hard:
-                zones[i] = 1 if q > self.limits.upper[i] else -1 if q < self.limits.lower[i] else 0
-            codes.append(code)
-        return self.clamps.initial((*codes, *zones)) if self.clamps else (*codes, *zones)
-
     def settle(self, y, mode) -> tuple:
         """The mode with every fixed joint's holding torque admissible: within ±Fsᵢ when
         stuck, pushing away from a hard limit it rests on. The worst violator is released
@@ -134,18 +120,8 @@ class Switching:
                     worst, which = excess, i
             if which is None:
                 return mode
-            mode = self.release(mode, which, y, lam[which])
+            mode = release(self, mode, which, y, lam[which])
         return mode
-
-    def release(self, mode, i, y, lam) -> tuple:
-        codes = list(mode[:2])
-        if codes[i] == "stuck":
-            up = lam < 0.0                        # slips toward the net torque
-            at = self.hard and (y[i] >= self.limits.upper[i] if up else y[i] <= self.limits.lower[i])
-            codes[i] = ("upper" if up else "lower") if at else ("+" if up else "-")
-        else:
-            codes[i] = "stuck" if self.friction is not None else "free"
-        return (*codes, *mode[2:])
 
     def substeps_for(self, h: float, engaged: bool) -> int:
         """The plan's sub-steps; while a compliant limit is engaged, enough to resolve it."""
@@ -155,19 +131,25 @@ class Switching:
 
     # --- stepping ------------------------------------------------------------------------
 
-    def advance(self, f, y, h):
+    def advance(self, f, y, h, piece=None):
         """step(f, y, h) with every switch inside the step located and applied (f unused:
-        each mode has its own right-hand side)."""
+        each mode has its own right-hand side). `piece(rhs, y0, dt, y1)` is told every
+        smooth sub-step taken, up to a located switch (accuracy.py estimates them)."""
         if y is not self._last:                  # reset, or a state set from outside
-            self.mode = self.settle(y, self.clamped(y, self.initial_mode(y)))
+            self.mode = self.settle(y, self.clamped(y, initial_mode(self, y)))
         elif self.clamps is not None and self.clamps.stale():   # a new command
             self.mode = self.settle(y, self.clamped(y, self.mode))
         rhs, _, guard, kinds, _ = self.functions(self.mode)
         if self.substeps == 1 and not (self.mode[2] or self.mode[3]):   # the common case
             y1 = self.step(rhs, y, h)
             if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+                if piece is not None:
+                    piece(rhs, y, h, y1)
                 self._last = y1
                 return y1
+        engaged = bool(self.mode[2] or self.mode[3])
+        if piece is None and self.checked is not None and (self.substeps == 1 or engaged):
+            return self.checked(f, y, h)     # a switch inside or a contact: estimate it
         remaining, events = h, 0
         while remaining > 1e-15 * h:
             mode = self.mode
@@ -178,12 +160,16 @@ class Switching:
             for k in range(count):
                 y1 = self.step(rhs, y, dt)
                 if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+                    if piece is not None:
+                        piece(rhs, y, dt, y1)
                     y = y1
                     continue
                 elapsed = h - remaining + k * dt          # from the step's start
                 if self.locate and events < MAX_EVENTS_PER_STEP:
-                    t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed)
+                    t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed, piece)
                 else:
+                    if piece is not None:
+                        piece(rhs, y, dt, y1)
                     t, y = dt, self.apply(y1, fired(guard, kinds, y1[:self.width]), False,
                                           elapsed + dt)
                 events += 1
@@ -194,9 +180,10 @@ class Switching:
         self._last = y = tuple(y)
         return y
 
-    def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed):
+    def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed, piece=None):
         """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
-        regula falsi on re-steps of length t from y0, to TIME_TOLERANCE."""
+        regula falsi on re-steps of length t from y0, to TIME_TOLERANCE; `piece` is told
+        the smooth re-step up to the switch."""
         def g(t):
             y = self.step(rhs, y0, t) if t > 0.0 else y0
             return min(guard(*y[:self.width])), y
@@ -219,9 +206,11 @@ class Switching:
                 a, ga, ya = t, gt, yt
                 gb, side = (0.5 * gb, side + 1) if side > 0 else (gb, 1)
         switches = fired(guard, kinds, yb[:self.width])
-        if switches and switches[0][0] == "impact":   # arrive, not pass: the state before
-            return a, self.apply(ya, switches[:1], at=elapsed + b)
-        return b, self.apply(yb, switches, at=elapsed + b)
+        impact = switches and switches[0][0] == "impact"   # arrive, not pass: the state before
+        t, y = (a, ya) if impact else (b, yb)
+        if piece is not None and t > 0.0:
+            piece(rhs, y0, t, y)
+        return t, self.apply(y, switches[:1] if impact else switches, at=elapsed + b)
 
     # --- switches ------------------------------------------------------------------------
 
@@ -250,6 +239,7 @@ class Switching:
                 kind = self.clamps.kind(kind, i, self.mode)
             self.count(kind, i, at)
         return y
+
 
     def count(self, kind: str, joint: int, at) -> None:
         self.counts[kind] += 1
@@ -299,3 +289,34 @@ def impulse(stepper, y, mode, i, located) -> None:
         mode[i] = ("-" if upper else "+") if stepper.friction is not None else "free"
     else:
         mode[i] = "upper" if upper else "lower"
+
+
+def release(stepper, mode, i, y, lam) -> tuple:
+    """`mode` with joint i freed: a stuck joint slips toward the net torque lam (onto a hard
+    limit it rests against), a resting one comes free."""
+    codes = list(mode[:2])
+    if codes[i] == "stuck":
+        up = lam < 0.0                        # slips toward the net torque
+        limits = stepper.limits
+        at = stepper.hard and (y[i] >= limits.upper[i] if up else y[i] <= limits.lower[i])
+        codes[i] = ("upper" if up else "lower") if at else ("+" if up else "-")
+    else:
+        codes[i] = "stuck" if stepper.friction is not None else "free"
+    return (*codes, *mode[2:])
+
+
+def initial_mode(stepper, y) -> tuple:
+    """The mode a state y starts in (a joint at rest on a hard limit rests there)."""
+    codes, zones = [], [0, 0]
+    for i in (0, 1):
+        q, u, code = y[i], y[2 + i], "free"
+        if stepper.friction is not None:
+            code = "+" if u > 0 else "-" if u < 0 else "stuck"
+        if stepper.hard and u == 0.0 and q >= stepper.limits.upper[i]:
+            code = "upper"
+        elif stepper.hard and u == 0.0 and q <= stepper.limits.lower[i]:
+            code = "lower"
+        elif stepper.limits is not None and not stepper.hard:
+            zones[i] = 1 if q > stepper.limits.upper[i] else -1 if q < stepper.limits.lower[i] else 0
+        codes.append(code)
+    return stepper.clamps.initial((*codes, *zones)) if stepper.clamps else (*codes, *zones)

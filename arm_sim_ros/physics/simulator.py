@@ -12,7 +12,7 @@ and reported once, the first time, as a `saturation` event.
 """
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from math import isfinite, nan
 
@@ -99,10 +99,13 @@ class Simulator:
         self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
         self._plan_substeps(self._tableau)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
-        self.switching, self._advance = switching_for(   # friction, limits: events.py
+        self.switching, _ = switching_for(   # friction, limits, clamps: events.py
             self.dynamics, self._tableau, self._step, self._advance, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
-        self.accuracy = accuracy.UNCHECKED if self.switching else self.accuracy
+        self.accuracy = accuracy.plan(self._tableau, self._step, self._advance, self.substeps,
+                                      scene.tolerance, 4, self._emit, lambda: self.steps,
+                                      self.switching, getattr(self, "accuracy", None))
+        self._advance = self.accuracy.check      # a step that checks its error (accuracy.py)
 
     def reset(self) -> None:
         s = self.scene
@@ -116,8 +119,9 @@ class Simulator:
         self.dynamics.command[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
         self.diverged = None         # why the run diverged (guard.py), held until reset
+        self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
         self._sound = self.state     # the latest state the divergence check found sound
-        self.switch_events = self.switching.reset() if self.switching else {}  # by kind
+        self.switch_events = self.switching.reset() if self.switching else Counter()  # by kind
         self.accuracy.reset()
 
     @property
@@ -130,24 +134,24 @@ class Simulator:
         self.dynamics.command[1] = tau2
 
     def set_payload(self, mass: float) -> None:
-        """Grasp (mass grows: M(q) q̇ is kept, an inelastic grasp of a mass at rest) or
-        release (q̇ is kept) a payload now; the energy that changes hands is booked in the
-        `payload_exchange` channel, so the balance still closes."""
-        before = self.energy(self.state)
-        old_mass = self.scene.payload["mass"] if self.scene.payload is not None else 0.0
-        old_names, old_state, old_arm = self.state_names, self.state, self.arm
-        self._build(self.scene.replace(payload={"mass": mass}), self.dynamics.command)
-        q, qd = old_state[0:2], old_state[2:4]
-        if mass > old_mass:
-            m11, m12, m22 = model.mass_matrix(old_arm, q)
+        """Grasp (M(q) q̇ kept: an inelastic grasp of a mass at rest) or release (q̇ kept) a
+        payload now; the energy that changes hands is booked in `payload_exchange`."""
+        before, old, q, qd = self.energy(self.state), self.scene, self.state[0:2], self.state[2:4]
+        self.change_scene(old.replace(payload={"mass": mass}))
+        if mass > (old.payload or {"mass": 0.0})["mass"]:
+            m11, m12, m22 = model.mass_matrix(old.arm, q)
             momentum = (m11 * qd[0] + m12 * qd[1], m12 * qd[0] + m22 * qd[1])
             qd = model.solve_mass_matrix(*model.mass_matrix(self.arm, q), *momentum)
-        carried = dict(zip(old_names, old_state))
-        state = [carried.get(name, 0.0) for name in self.state_names]
-        state[2:4] = qd
-        exchange = self.state_names.index("payload_exchange")
-        state[exchange] += self.energy(state) - before
-        self.state = tuple(state)
+        state = [*self.state[0:2], *qd, *self.state[4:]]
+        state[self.state_names.index("payload_exchange")] += self.energy(state) - before
+        self.state = self._sound = tuple(state)
+
+    def change_scene(self, scene: Scene) -> None:
+        """From the next step, `scene`'s effects; time, state and books kept (step size too)."""
+        carried, was = dict(zip(self.state_names, self.state)), self.books(self.state)
+        self._build(scene, self.dynamics.command)
+        self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
+        self.retired = tuple(r + w - n for r, w, n in zip(self.retired, was, self.books(self.state)))
 
     def _plan_substeps(self, tableau) -> None:
         (self.stability_ratio, self.stability_limit, self.substeps, self._advance,
@@ -155,26 +159,24 @@ class Simulator:
                                    self._step)
         if message:
             self._emit("substepping", message)
-        self.accuracy = accuracy.plan(tableau, self._step, self._advance, self.substeps,
-                                      self.scene.tolerance, 4, self._emit)
-        self._advance = self.accuracy.advance
 
     @property
     def substeps_taken(self) -> int:
         """Sub-steps run since reset in split steps (0 while plain steps do)."""
-        if self.accuracy.taken is not None:        # stability and tolerance (accuracy.py)
-            return self.accuracy.taken
+        taken = self.accuracy.taken(self.steps)     # stability and tolerance (accuracy.py)
+        if taken is not None:
+            return taken
         return self.steps * self.substeps if self.substeps > 1 else 0
 
     @property
     def error_estimate(self) -> float:
-        """The latest step's local error estimate, rad and rad/s (NaN: modes switch)."""
+        """The latest step's local error estimate, rad and rad/s (carried between checks)."""
         return self.accuracy.error_estimate
 
     @property
     def accumulated_error(self) -> float:
         """Σ error_estimate since reset: bounds the global error while errors do not grow."""
-        return self.accuracy.accumulated_error
+        return self.accuracy.accumulated(self.steps)
 
     @property
     def holding(self) -> bool:
@@ -186,8 +188,10 @@ class Simulator:
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
             return
+        books = self.accuracy       # plain planned steps until a check is due: no wrapper
         try:
-            y = self._advance(self._rhs, self.state, self.step_size)
+            y = (books.plain if self.steps < books.due else self._advance)(
+                self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
             self._refuse(f"cannot be taken: {error}")
         else:
@@ -241,9 +245,9 @@ class Simulator:
         return dict(zip(self.channels, state[first:first + len(self.channels)]))
 
     def books(self, state) -> tuple[float, float]:
-        """(Σ input channels, Σ loss channels) carried in a state; 0 where there are none."""
-        return (sum((state[i] for i in self._inputs), 0.0),
-                sum((state[i] for i in self._losses), 0.0))
+        """(Σ input channels, Σ loss channels) carried in a state, retired ones included."""
+        return (sum((state[i] for i in self._inputs), self.retired[0]),
+                sum((state[i] for i in self._losses), self.retired[1]))
 
     def residual(self) -> float:
         work, dissipated = self.books(self.state)

@@ -2,10 +2,11 @@
 Rerun's URDF loader, its two joints turned by the simulated angles, each link's centre of
 mass, the joint torques as arrows along the joint axes and the gravity vector.
 
-The URDF's frames are the physics' (x right, y up, z out of the plane; both joints about
-+z), so nothing is flipped here. The URDF holds the default arm (1 m rods, COMs at 0.5 m):
-a scene whose links differ gets no 3D view rather than a wrong one. The joints and arrows
-are sent at the 2D drawing's frames (writer.FRAME_PERIOD), from the sender thread.
+The URDF's root is the world, z up as in RViz (physics/urdf.py says how its frames map onto
+the physics' plane): the view is z up, the arm's plane vertical, gravity pointing down. The
+URDF holds the default arm (1 m rods, COMs at 0.5 m): a scene whose links differ gets no 3D
+view rather than a wrong one. The joints and arrows are sent at the 2D drawing's frames
+(writer.FRAME_PERIOD), from the sender thread.
 """
 from __future__ import annotations
 
@@ -17,12 +18,14 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from ..physics.urdf import read_urdf
 from .columns import joint_transforms, vectors3d
 
 ROOT = "arm3d"
 URDF_NAME = "two_link_arm.urdf"
 JOINTS = ("shoulder_joint", "elbow_joint")
 LINKS = ("link1", "link2")               # the frame each joint turns, in URDF order
+PLANE = "arm_plane"                      # the URDF's frame of the physics' plane (y up)
 TORQUE_SCALE = 0.05                      # m of arrow per N m of joint torque
 GRAVITY_SCALE = 0.05                     # m of arrow per m/s² of gravity
 TORQUE_PATHS = tuple(f"{ROOT}/torque/{joint}" for joint in JOINTS)
@@ -57,27 +60,25 @@ class Arm3D:
         if path is None:
             return None
         try:
-            made = cls(path)
-        except Exception:     # an unreadable URDF: no 3D view, the recording goes on
+            made, read = cls(path), read_urdf(path.read_text(encoding="utf-8"))
+        except Exception:     # unreadable (Rerun's loader or ours): no 3D view, the recording goes on
             return None
-        lengths = (made.joints[1].origin_xyz[0], made.tree.get_joint_by_name("tip_joint")
-                   .origin_xyz[0])
-        same = np.allclose(lengths, arm.link_lengths, rtol=0, atol=1e-9) and all(
-            tuple(j.axis) == (0.0, 0.0, 1.0) and not any(j.origin_rpy) for j in made.joints)
-        return made if same and np.allclose(arm.com_distances, (0.5 * lengths[0],
-                                                                0.5 * lengths[1])) else None
+        same = (read.link_lengths[1] is not None
+                and np.allclose(read.link_lengths, arm.link_lengths, rtol=0, atol=1e-9)
+                and np.allclose(read.com_distances, arm.com_distances, rtol=0, atol=1e-9))
+        return made if same else None
 
     def log_static(self, stream, arm, gravity: float, torques: bool) -> None:
         """The links (Rerun's URDF loader), the COMs in their links' frames, the gravity
         vector at the base, and the torque arrows' frames and colours."""
         stream.log_file_from_path(self.path, entity_path_prefix=ROOT, static=True)
-        stream.log(ROOT, rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)   # as the URDF's frames
+        stream.log(ROOT, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)   # as the URDF's root
         for link, distance, mass in zip(LINKS, arm.com_distances, arm.link_masses):
             stream.log(f"{ROOT}/com/{link}", rr.CoordinateFrame(link),
                        rr.Points3D([(distance, 0.0, 0.0)], radii=[0.035], colors=[(245, 245, 245)],
                                    labels=[f"COM {mass:g} kg"], show_labels=False), static=True)
-        if gravity:
-            stream.log(f"{ROOT}/gravity", rr.CoordinateFrame("base_link"), rr.Arrows3D(
+        if gravity:   # along the plane's -y: the world's -z
+            stream.log(f"{ROOT}/gravity", rr.CoordinateFrame(PLANE), rr.Arrows3D(
                 origins=[(-0.5 * sum(arm.link_lengths), 0.0, 0.0)],
                 vectors=[(0.0, -GRAVITY_SCALE * gravity, 0.0)], colors=[(100, 150, 255)],
                 labels=[f"g {gravity:g} m/s²"], radii=[0.015]), static=True)
@@ -87,23 +88,38 @@ class Arm3D:
                     colors=[color], radii=[0.02]), static=True)
 
     def send(self, stream, index, q1, q2, torque=None) -> None:
-        """The joints at angles q1, q2 (a turn about +z: the URDF's axes, checked in
-        for_arm) and, with a drive, the (n, 2) joint torques as arrows along +z, on the time
-        columns `index`. Built as Arrow: UrdfJoint.compute_transform_columns costs 1.5 µs
-        a step through Python lists."""
+        """The joints at angles q1, q2 (each a turn about its axis after its origin's
+        rotation) and, with a drive, the (n, 2) joint torques as arrows along the joint axes,
+        on the time columns `index`. Built as Arrow: UrdfJoint.compute_transform_columns
+        costs 1.5 µs a step through Python lists."""
         for joint, angles in zip(self.joints, (q1, q2)):
             half = 0.5 * np.asarray(angles, dtype=float)
-            xyzw = np.zeros((len(half), 4))
-            xyzw[:, 2], xyzw[:, 3] = np.sin(half), np.cos(half)
+            turn = np.zeros((len(half), 4))
+            turn[:, :3], turn[:, 3] = np.outer(np.sin(half), joint.axis), np.cos(half)
             rr.send_columns(f"{ROOT}/joints/{joint.name}", indexes=index,
-                            columns=joint_transforms(xyzw, joint.origin_xyz, joint.parent_link,
+                            columns=joint_transforms(compose(rpy_quaternion(joint.origin_rpy), turn),
+                                                     joint.origin_xyz, joint.parent_link,
                                                      joint.child_link), recording=stream)
         if torque is None:
             return
-        for k, path in enumerate(TORQUE_PATHS):
-            arrows = np.zeros((len(torque), 3))
-            arrows[:, 2] = TORQUE_SCALE * torque[:, k]
+        for k, (path, joint) in enumerate(zip(TORQUE_PATHS, self.joints)):
+            arrows = TORQUE_SCALE * np.outer(torque[:, k], joint.axis)
             rr.send_columns(path, indexes=index, columns=vectors3d(arrows), recording=stream)
+
+
+def rpy_quaternion(rpy) -> np.ndarray:
+    """URDF's roll-pitch-yaw (fixed x, y, z axes) as a quaternion (x, y, z, w)."""
+    (cr, cp, cy), (sr, sp, sy) = np.cos(0.5 * np.asarray(rpy)), np.sin(0.5 * np.asarray(rpy))
+    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
+
+
+def compose(first, then) -> np.ndarray:
+    """Hamilton products first ⊗ then[i] of quaternions (x, y, z, w): `then` in `first`'s frame."""
+    (x1, y1, z1, w1), (x2, y2, z2, w2) = first, then.T
+    return np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2],
+                    axis=1)
 
 
 @lru_cache(maxsize=8)

@@ -13,7 +13,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..physics.effects import MAPPING_EFFECTS, EffortLimits
-from .readouts import COMMANDED, KINDS, channel_path, extra_paths, stored_path
+from .readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, SUBSTEPS,
+                       accuracy_paths, channel_path, extra_paths, stored_path)
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 ROS_TIME = "ros_time"            # the JointState stamp of each row: stamp origin + sim_time
@@ -66,8 +67,19 @@ NODE_SERIES = {
                               (110, 230, 110)),
     "node/substeps": ("Sub-steps / tick", "RK sub-steps in the tick", "1/tick", (90, 180, 255)),
 }
+# The error books, one row per step (readouts.accuracy_values): (series name, colour, width).
+ACCURACY_SERIES = {
+    LOCAL_ERROR: ("local error estimate", (255, 170, 60), NARROW),
+    ACCUMULATED_ERROR: ("accumulated error estimate", (90, 180, 255), NARROW),
+    SUBSTEPS: ("sub-steps per step", (110, 230, 110), NARROW),
+}
+# A count over the steps since the row before (sub-steps): held back to that row, not drawn
+# as a ramp between the two.
+STEPPED = {path: rr.components.InterpolationMode.StepBefore
+           for path in (SUBSTEPS, "node/substeps")}
 UNITS = {"energy": "J", "books": "J", "joints/angle": "rad", "joints/velocity": "rad/s",
-         "joints/torque": "N m", COMMANDED: "N m", "joints/current": "A"}
+         "joints/torque": "N m", COMMANDED: "N m", "joints/current": "A",
+         "accuracy": "rad, rad/s", SUBSTEPS: "1/step"}
 TRACE_COLOR = (190, 190, 190)     # neutral: violet is the residual's
 HORIZON_COLOR = (100, 100, 100)
 # The physics' y up into the 2D view's y down: the arm's drawing is stored as the physics has it.
@@ -111,6 +123,9 @@ def series(snap) -> dict:
         out[path] = (names, JOINT_COLORS[:len(names)], (NARROW,) * len(names))
     if snap.commanded:
         out[COMMANDED] = (COMMANDED_SERIES, COMMANDED_COLORS, (NARROW, NARROW))
+    for path in accuracy_paths(snap):
+        name, color, width = ACCURACY_SERIES[path]
+        out[path] = ((name,), (color,), (width,))
     return out
 
 
@@ -170,19 +185,66 @@ def node_views() -> list:
 
 
 def arm3d_view(arm) -> rrb.Spatial3DView:
-    """The URDF arm (recording/arm3d.py), y up (the floor grid is V = 0), seen from the
-    front right and above, so the torque arrows along z show."""
+    """The URDF arm (recording/arm3d.py), z up as in RViz (the floor grid is V = 0), seen
+    from the plane's counter-clockwise side (-y), right of and above it, so the torque
+    arrows along the joint axes show."""
     extent = reach(arm)
     return rrb.Spatial3DView(
-        name="Arm in 3D (URDF): COMs, torques along z, g", origin="arm3d",
-        eye_controls=rrb.EyeControls3D(position=(0.6 * extent, 0.4 * extent, 1.35 * extent),
+        name="Arm in 3D (URDF): COMs, torques along the axes, g", origin="arm3d",
+        eye_controls=rrb.EyeControls3D(position=(0.6 * extent, -1.35 * extent, 0.4 * extent),
                                        look_target=(0.0, 0.0, 0.0),
-                                       eye_up=(0.0, 1.0, 0.0)))
+                                       eye_up=(0.0, 0.0, 1.0)))
+
+
+TRUST = "Can I trust this run?"
+OVERVIEW = "Arm, energy books, joints"
+
+
+def held_by(snap) -> str:
+    """What holds each step's local error, for the local error pane's title."""
+    if snap.adaptive:
+        return f"held by {snap.scene.integrator}'s rtol and atol"
+    if snap.tolerance:
+        return f"tolerance {snap.tolerance:g} per s (scaled error |e|/(1+|y|))"
+    return "tolerance 0: estimate only"
+
+
+def trust_view(snap) -> rrb.Vertical:
+    """One look at whether to believe the run: the energy books close (the residual, J),
+    each step's local error estimate and their sum (rad, rad/s; the tolerance in the title:
+    it is a scaled error per second, in no unit the estimate has), what holding them cost
+    (sub-steps per step) and what the simulator did (events). Each pane scales to its own
+    series: J and rad apart, a step's error apart from the sum of thousands. The legends
+    here name each series with its unit (the entities' own names leave the unit to their
+    `unit`, which `arm-sim inspect` appends)."""
+    legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
+
+    def pane(title, named):
+        return rrb.TimeSeriesView(
+            name=title, contents=list(named), plot_legend=legend,
+            overrides={path: rr.SeriesLines.from_fields(names=[drawable(name)])
+                       for path, name in named.items()})
+    panes = [pane(f"Energy balance residual [J]: flat at 0 when the books close "
+                  f"(E(0) = {snap.initial_energy:.6g} J)",
+                  {RESIDUAL[0]: "residual E−E₀−inputs+losses [J]"})]
+    if snap.estimates:
+        panes += [pane(f"Local error per step [rad, rad/s]; {held_by(snap)}",
+                       {LOCAL_ERROR: "local error estimate [rad, rad/s]"}),
+                  pane("Accumulated error [rad, rad/s]: estimate of the global error",
+                       {ACCUMULATED_ERROR: "accumulated error estimate [rad, rad/s]"})]
+    none = "" if snap.estimates else " (no error estimate for these steps)"
+    panes.append(pane(f"Sub-steps per step: what accuracy and stability cost{none}",
+                      {SUBSTEPS: "sub-steps per step [1]"}))
+    events = rrb.TextLogView(name="Events: sub-stepping, saturation, switches, faults",
+                             origin="events")
+    return rrb.Vertical(rrb.Grid(*panes, grid_columns=2), events, row_shares=[3, 1],
+                        name=TRUST)
 
 
 def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
-    """Arm, effects and events on the left; the energy books, the energy levels, the joints
-    and (for the node) its story per tick on the right."""
+    """Two tabs, the trust view (trust_view) open first; then the arm, effects and events
+    on the left, the energy books, the energy levels, the joints and (for the node) its
+    story per tick on the right."""
     extent = reach(snap.arm)
     trace_range = rrb.VisibleTimeRanges(
         timeline=TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TRACE_SECONDS),
@@ -207,15 +269,15 @@ def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
     right = [books, levels, rrb.Horizontal(*joints)]
     if node:
         right.append(rrb.Horizontal(*node_views()))
+    overview = rrb.Horizontal(
+        rrb.Vertical(arm_view,
+                     rrb.TextDocumentView(name="Effects the scene calls for", origin=EFFECTS_PATH),
+                     rrb.TextLogView(name="Events", origin="events"),
+                     row_shares=[4, 4, 2]),
+        rrb.Vertical(*right, row_shares=[5, 2, 2, 2][:len(right)]),
+        column_shares=[2, 3], name=OVERVIEW)
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(arm_view,
-                         rrb.TextDocumentView(name="Effects the scene calls for",
-                                              origin=EFFECTS_PATH),
-                         rrb.TextLogView(name="Events", origin="events"),
-                         row_shares=[4, 4, 2]),
-            rrb.Vertical(*right, row_shares=[5, 2, 2, 2][:len(right)]),
-            column_shares=[2, 3]),
+        rrb.Tabs(trust_view(snap), overview, active_tab=0),   # the trust view opens
         rrb.TimePanel(timeline=TIMELINE, play_state="following" if live else "paused",
                       state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
@@ -292,7 +354,8 @@ def styles(snap, node: bool = False) -> list:
     drawing into the viewer's frame, the horizon, and how links, joints and trace are drawn."""
     styled = series(snap) | (node_series() if node else {})
     static = [(path, [rr.SeriesLines(names=[drawable(n) for n in names], colors=list(colors),
-                                     widths=list(widths)), rr.AnyValues(unit=unit(path))])
+                                     widths=list(widths), interpolation_mode=STEPPED.get(path)),
+                      rr.AnyValues(unit=unit(path))])
               for path, (names, colors, widths) in styled.items()]
     extent = reach(snap.arm)
     return static + [(path, [archetype]) for path, archetype in [

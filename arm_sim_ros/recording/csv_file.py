@@ -2,7 +2,10 @@
 
 Columns: t, the state (q1, q2, qd1, qd2 and any extra state such as the winding currents
 i1, i2), the joint torque, the energies, work and dissipated energy (0 where absent), every
-other channel of the scene by name, and the balance residual.
+other channel of the scene by name, the balance residual, and the simulator's error books
+after the step: error_estimate (the step's local error estimate) and accumulated_error
+(their sum since reset), both max over q, qd (rad, rad/s); nan where the simulator does
+not estimate the steps.
 
 Rows are written in blocks of about BLOCK_BYTES. A write the disk refuses (a full disk,
 a file-size limit) ends the run with one line: the file is cut back to the last whole row
@@ -21,7 +24,7 @@ from contextlib import suppress
 from ..usage import UsageError
 
 CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
-               "work", "dissipated", "residual")
+               "work", "dissipated", "residual", "error_estimate", "accumulated_error")
 BOOKS = ("work", "dissipated")
 BLOCK_BYTES = 1 << 16
 
@@ -65,7 +68,8 @@ class CsvRecorder:
     def step(self, sim) -> None:
         s = sim.sample()
         row = (s.t, *s.q, *s.qd, *s.extra.values(), *s.tau, s.kinetic, s.potential, s.total,
-               s.work, s.dissipated, *(s.channels[c] for c in self._others), s.residual)
+               s.work, s.dissipated, *(s.channels[c] for c in self._others), s.residual,
+               sim.error_estimate, sim.accumulated_error)
         self._writer.writerow([repr(v) for v in row])
         if self._block.tell() >= BLOCK_BYTES:
             self._flush()

@@ -24,12 +24,17 @@ from types import FunctionType
 import numpy as np
 
 from ..physics.effects import Effect
+from ..physics.integrators import INTEGRATORS
 
 # Each effect's stored energy as a part of E: the part's name in the books.
 STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
 KINDS = ("input", "loss", "transfer")
 CURRENTS = ("i1", "i2")           # the windings' extra states (A)
 COMMANDED = "joints/commanded_torque"
+# How far each step is from the exact flow (physics/accuracy.py), and what it cost.
+LOCAL_ERROR = "accuracy/local_error"            # the step's estimate, max over q, q̇
+ACCUMULATED_ERROR = "accuracy/accumulated_error"  # their sum since reset
+SUBSTEPS = "accuracy/substeps"                  # sub-steps the step was taken as
 
 
 def stores_energy(effect) -> bool:
@@ -72,6 +77,12 @@ class Snapshot:
         self.commanded = sim.scene.policy.startswith("command")
         self.arm3d = None         # the recorder's 3D arm (arm3d.Arm3D), when the URDF is this arm
         self.initial_energy = sim.initial_energy
+        # (inputs, losses) booked by channels a live change removed (damping set to 0 ...)
+        self.retired = tuple(getattr(sim, "retired", (0.0, 0.0)))
+        self.estimates = sim.error_estimate == sim.error_estimate   # NaN: not estimated
+        # An embedded pair (dopri5) is held by rtol and atol, not by `tolerance`.
+        self.tolerance = sim.scene.tolerance
+        self.adaptive = getattr(INTEGRATORS[sim.scene.integrator], "adaptive", False)
         self._torque = vectorised(dynamics.torque_function) if self.drives else None
         if initial is None:
             scene = sim.scene
@@ -96,7 +107,7 @@ class Snapshot:
     def key(self) -> tuple:
         """What the blueprint and the series' styles depend on."""
         return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
-                self.commanded)
+                self.commanded, self.estimates, self.adaptive, self.tolerance)
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -147,7 +158,7 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     potential = sum(stored.values()) if stored else np.zeros_like(kinetic)
     total = kinetic + potential
     books = {name: states[:, snap.first + i] for i, name in enumerate(snap.channels)}
-    inputs = losses = 0.0
+    inputs, losses = snap.retired
     for name, kind in snap.kinds.items():
         if kind == "input":
             inputs = inputs + books[name]
@@ -191,3 +202,44 @@ def unpack(runs, states, n):
     commands = (np.repeat(np.array([c for _, c, _ in runs], float), lengths, axis=0)
                 if runs[0][1] is not None else None)
     return steps, states, commands
+
+
+def accuracy_paths(snap: Snapshot) -> list[str]:
+    """The error books' entities: the estimates where the simulator makes them, and the
+    sub-steps always."""
+    return ([LOCAL_ERROR, ACCUMULATED_ERROR] if snap.estimates else []) + [SUBSTEPS]
+
+
+def accuracy_values(snap: Snapshot, steps, books, before: tuple):
+    """({entity path: (rows, values)}, sub-steps of every row (nan: a run's initial row),
+    (step, substeps_taken) of the last row) from the error books sampled in a batch:
+    `books` (m, 4) rows of (step, error_estimate, accumulated_error, substeps_taken), steps
+    ascending, the batch's last step among them; `steps`: each row's step; `before`: (step,
+    substeps_taken) of the last sample before the batch ((0, 0): none).
+
+    The estimates are each sampled step's own. Sub-steps: the growth of substeps_taken per
+    step since the sample before (no growth: plain steps, 1 each), given to each step in
+    between; exact while the count holds, its mean where it changes (substeps_taken counts
+    split steps only, so a span of plain and split steps reads at least 1). A count that
+    fell or a step that went back restarted from 0 (a payload's rebuild, a reset)."""
+    at, local, accumulated, taken = books.T
+    rows = np.searchsorted(steps, at)
+    previous_step = np.concatenate(([before[0]], at[:-1]))
+    previous_taken = np.concatenate(([before[1]], taken[:-1]))
+    back = at < previous_step                      # a reset: the run starts again at 0
+    span = at - np.where(back, 0.0, previous_step)
+    grown = taken - np.where(back | (taken < previous_taken), 0.0, previous_taken)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(grown == 0.0, 1.0, np.maximum(grown / span, 1.0))
+    mean[span == 0] = np.nan                       # a run's initial row: no step
+    starts = np.concatenate(([0], rows[:-1] + 1))
+    per_row = np.repeat(mean, rows - starts + 1)   # each step gets its span's
+    is_step = at > 0
+    values = {}
+    if snap.estimates:
+        known = np.flatnonzero(is_step & np.isfinite(local) & np.isfinite(accumulated))
+        values[LOCAL_ERROR] = rows[known], local[known]
+        values[ACCUMULATED_ERROR] = rows[known], accumulated[known]
+    known = np.flatnonzero(is_step & np.isfinite(mean))
+    values[SUBSTEPS] = rows[known], mean[known]
+    return values, per_row, (float(at[-1]), float(taken[-1]))

@@ -10,12 +10,14 @@ batch at a time.
 """
 from __future__ import annotations
 
+from math import nan
+
 import numpy as np
 import rerun as rr
 
 from .blueprint import NODE_SERIES
 from .columns import nanoseconds, points, scalars, strips, time_columns
-from .readouts import channel_values, drawing_points, unpack
+from .readouts import accuracy_values, channel_values, drawing_points, unpack
 from .story import TickStory
 
 FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
@@ -34,26 +36,48 @@ class BatchWriter:
         self._last_wall = None    # log_time of the last row sent, ns
         self.stamp_origin_ns = 0  # ros_time at sim_time 0; None: no ros_time timeline
         self._story = TickStory()  # the node's ticks: refused, late, real-time factor, sub-steps
+        self._books_before = (0.0, 0.0)   # (step, substeps_taken) of the last books sent
+        self._row_substeps = np.zeros(0)   # sub-steps of each row of the batch (nan: unknown)
 
-    def send(self, snap, runs, states, events, ticks=(), walls=()) -> None:
+    def send(self, snap, runs, states, events, ticks=(), walls=(), books=None) -> None:
         """Runs of [first step, command, steps] with their flattened states, text lines
         (rows waiting before them, text, level) and the node's ticks (row, values), each at
-        its row (the last one if none), and the wall clock marks of the batch."""
+        its row (the last one if none), the wall clock marks of the batch, and the error
+        books sampled in it, flattened (step, error_estimate, accumulated_error,
+        substeps_taken; the batch's last step among them)."""
         n = sum(steps for _, _, steps in runs)
         if n:
             steps, states, commands = unpack(runs, states, n)
             self._timeline(steps * snap.step_size)
             self._wall_clock(n, walls)
             self._send_rows(snap, steps, states, commands)
+            if books:
+                self._send_accuracy(snap, steps, np.frombuffer(books, float).reshape(-1, 4))
+            else:
+                self._row_substeps = np.full(n, nan)
         if events:
             rows = [i for i, _, _ in events]
             self._send_columns("events", self._index(rows, n), rr.TextLog.columns(
                 text=[text for _, text, _ in events], level=[level for _, _, level in events]))
         if ticks:
             index = self._index([max(i, 0) for i, _ in ticks], n)
-            values = self._story.values([v for _, v in ticks])
+            values = self._story.values([v for _, v in ticks], self._tick_substeps(ticks))
             for k, path in enumerate(NODE_SERIES):
                 self._send_columns(path, index, scalars(values[:, k]))
+
+    def _send_accuracy(self, snap, steps, books) -> None:
+        """The error books sampled in the batch (readouts.accuracy_values), each at its row."""
+        values, self._row_substeps, self._books_before = accuracy_values(
+            snap, steps, books, self._books_before)
+        for path, (rows, column) in values.items():
+            if len(rows):
+                self._send_columns(path, self._index(rows, len(steps)), scalars(column))
+
+    def _tick_substeps(self, ticks) -> list:
+        """Each tick's sub-steps: those of its steps, which end at its row (nan: unknown)."""
+        sub = self._row_substeps
+        return [float(np.sum(sub[max(row - v[3] + 1, 0):row + 1])) if 0 <= row < len(sub)
+                else nan for row, v in ticks]
 
     def _index(self, rows, n):
         """The time columns of rows of this batch (clipped to its last; none: the last sent)."""

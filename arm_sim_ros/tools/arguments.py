@@ -1,19 +1,37 @@
 """What every `arm-sim` subcommand shares: choosing a scene from the command line."""
 from __future__ import annotations
 
-from ..physics.scene import Scene, load_scene, parse_value
+from pathlib import Path
+
+from ..physics.scene import Scene, SceneError, load_scene, parse_value
+from ..physics.urdf import scene_from_urdf
 
 
 def scene_from_args(args) -> Scene:
-    """The scene named by --scene, with --step and --set applied (shared by subcommands)."""
+    """The scene named by --scene, the arm of --urdf on it, then --step and --set applied
+    (shared by subcommands)."""
     scene = load_scene(args.scene)
+    if getattr(args, "urdf", None) is not None:
+        scene = scene_from_urdf(read_urdf_file(args.urdf), scene)
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
     return scene.with_text_overrides(getattr(args, "set", None) or [])
 
 
+def read_urdf_file(path: str) -> str:
+    """The text of the --urdf file, or SceneError (one line) saying why it cannot be read."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, ValueError) as error:        # missing, a directory, not UTF-8
+        reason = getattr(error, "strerror", None) or error
+        raise SceneError(f"--urdf {path}: cannot read it ({reason})") from None
+
+
 def add_scene_arguments(parser) -> None:
     parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`) or a scene .yaml file")
+    parser.add_argument("--urdf", metavar="FILE",
+                        help="take the arm from a planar 2R URDF: links, inertias, joint and "
+                             "effort limits, damping, friction; --scene gives the rest")
     parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="override a scene key, e.g. gravity=0, constant_torque=1,0 or "

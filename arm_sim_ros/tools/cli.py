@@ -13,6 +13,7 @@ import os
 import sys
 import time
 
+from ..physics.integrators import INTEGRATORS
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
@@ -27,6 +28,7 @@ SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
                       "arm_sim_ros.tools.batch",        # batch
                       "arm_sim_ros.tools.inspect",      # inspect
                       "arm_sim_ros.tools.record",       # record
+                      "arm_sim_ros.tools.urdf",         # urdf
                       "arm_sim_ros.tools.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:
@@ -48,19 +50,25 @@ CHECK_PERIOD = 0.05      # wall seconds between looks at a stop request and the 
 
 
 def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> float:
-    """sim.run(duration) with every recorder seeing every step: step_batch(sim, states)
-    once per chunk of at most RUN_BATCH_STEPS steps where a recorder has it (a Python call
-    per step costs more than logging's 10 % budget), else step(sim) after each step.
+    """sim.run(duration) with every recorder seeing every step: step_batch(sim, states,
+    books) once per chunk of at most RUN_BATCH_STEPS steps where a recorder has it (a
+    Python call per step costs more than logging's 10 % budget; `books`: the error books
+    of every books_every-th step, as telemetry.RerunRecorder.step_batch takes them), else
+    step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
     (its .requested set by a signal): every recorder has then seen the same last step.
     Returns the largest |residual| seen."""
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    states = []
-    keep = states.append
+    states, books = [], []
+    keep, book = states.append, books.extend
+    every = min((getattr(r, "books_every", 0) or RUN_BATCH_STEPS for r in batched),
+                default=RUN_BATCH_STEPS)
 
     def on_step(s):
         keep(s.state)
+        if s.steps % every == 0:
+            book((s.steps, s.error_estimate, s.accumulated_error, s.substeps_taken))
         for step in each:
             step(s)
 
@@ -71,8 +79,9 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
         started = time.perf_counter()
         largest = max(largest, sim.run(steps * sim.step_size, on_step if recorders else None))
         for recorder in batched:
-            recorder.step_batch(sim, states)
+            recorder.step_batch(sim, states, books)
         states.clear()
+        books.clear()
         left -= steps
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
             chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)
@@ -118,7 +127,7 @@ def cmd_run(args) -> int:
             finish_all(recorders, sim)
     result = sim.sample().as_dict() | {"max_abs_energy_drift": drift, "fault": sim.fault,
                                        "refused_steps": sim.refused_steps,
-                                       # None where modes switch (no estimate yet)
+                                       # None where the steps are not estimated
                                        **{k: (v if v == v else None) for k, v in (
                                            ("error_estimate", sim.error_estimate),
                                            ("accumulated_error", sim.accumulated_error))},
@@ -148,6 +157,9 @@ def format_result(scene: Scene, r: dict) -> str:
     def pair(v):
         return "(" + ", ".join(f"{x:.6f}" for x in v) + ")"
 
+    def estimate(v):      # None (JSON's null) or NaN: the scene's steps are not estimated
+        return "n/a" if v is None or v != v else f"{v:.3e}"
+
     currents = [f"{name} = {r[name]:.6f} A" for name in ("i1", "i2") if name in r]
     others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
               if name not in ("work", "dissipated")]
@@ -163,7 +175,18 @@ def format_result(scene: Scene, r: dict) -> str:
         *([", ".join(others)] if others else []),
         f"balance residual {r['residual']:.3e} J, max |residual| over the run "
         f"{r['max_abs_energy_drift']:.9f} J",
+        f"error estimate: latest step {estimate(r['error_estimate'])}, accumulated "
+        f"{estimate(r['accumulated_error'])} (rad, rad/s: max over q, qd); {held_by(scene)}",
     ])
+
+
+def held_by(scene: Scene) -> str:
+    """What holds the local error: the tolerance (scaled error per simulated second), or
+    for an embedded pair (dopri5) its rtol and atol."""
+    if INTEGRATORS[scene.integrator].adaptive:
+        return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
+    return (f"tolerance {scene.tolerance:g} per s (scaled: |e|/(1+|y|))" if scene.tolerance
+            else "tolerance 0 (estimate only)")
 
 
 def build_parser() -> ArgumentParser:

@@ -9,7 +9,6 @@ from outside (tests, benchmarks) or by `spin()`.
 from __future__ import annotations
 
 import logging
-import math
 import time
 
 from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
@@ -23,20 +22,13 @@ from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stam
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
+from ..ros_args import remap_name
+from ..schedule import TickSchedule
 from .dds_graph import NameWatch
 from .dds_clock import CLOCK_TOPIC, Clock, clock_message, clock_qos
 from .dds_services import DdsServices   # issue 15.3: parameter services, ~/reset
 
-CATCH_UP = 0.05   # wall seconds of lag made up by ticking back to back (scheduler jitter)
 LOCKSTEP_WAIT = 0.01   # wall seconds a lockstep node waits for a command before serving again
-
-
-def resolve_name(name: str, namespace: str = "/", remap: dict | None = None) -> str:
-    """A ROS topic name made absolute in `namespace`, after `-r from:=to` remapping."""
-    name = (remap or {}).get(name, name)
-    if name.startswith("/"):
-        return name
-    return namespace.rstrip("/") + "/" + name
 
 
 def to_joint_state(data: JointStateData) -> msg.JointState:
@@ -65,7 +57,9 @@ class DdsArmSimNode:
         self.log = log or logging.getLogger(name)
         self.wall_clock = wall_clock
         self.participant = msg.make_participant(domain_id, config)
-        topic = lambda ros_name: msg.ros_topic(resolve_name(ros_name, namespace, remap))  # noqa: E731
+        # Topic and service names as rcl resolves them: expanded, then remapped (-r from:=to).
+        self.resolve = lambda ros_name: remap_name(ros_name, name, namespace, remap)  # noqa: E731
+        topic = lambda ros_name: msg.ros_topic(self.resolve(ros_name))  # noqa: E731
         values = node_config.values
         self.joint_state_writer = self._writer(topic(values["joint_states_topic"]), msg.JointState)
         self.diagnostics_writer = self._writer(topic(DIAGNOSTICS_TOPIC), msg.DiagnosticArray)
@@ -80,7 +74,8 @@ class DdsArmSimNode:
             self._command_ready.attach(ReadCondition(
                 reader, SampleState.Any | ViewState.Any | InstanceState.Any))
         # --- issue 15.3: rcl_interfaces parameter services, ~/reset, /parameter_events ---
-        self.services = DdsServices(self.participant, name, namespace, self.log)
+        self.services = DdsServices(self.participant, name, namespace, self.log,
+                                    resolve=self.resolve)
         # --- end issue 15.3 ---
         self._announce()
         self.name_watch = NameWatch(self.participant, namespace, name, self.log)
@@ -156,36 +151,29 @@ class DdsArmSimNode:
     # the loop ------------------------------------------------------------------------------
 
     def spin(self, duration_s: float | None = None, on_status=None) -> None:
-        """Tick at publish_rate x real_time_factor (as fast as possible when 0) until
-        `duration_s` of simulated time has passed, or forever. Once a wall second: diagnostics
-        and `on_status(line)`. A late tick is counted; ticks then follow back to back until
-        the schedule is met again, unless it is more than CATCH_UP behind, when the schedule
-        restarts from now instead of bursting. Every tick is exactly steps_per_tick steps."""
-        config = self.core.config
-        ticks = None if duration_s is None else math.ceil(duration_s / config.tick_period - 1e-9)
-        period = config.wall_period
-        next_tick = self.wall_clock()
-        next_status = next_tick + 1.0
-        done = 0
-        while ticks is None or done < ticks:
+        """Tick at publish_rate x real_time_factor (as fast as possible when 0) until the
+        simulated time since start reaches `duration_s`, or forever: whatever publish_rate,
+        step_size or lockstep become meanwhile, and across resets. Once a wall second:
+        diagnostics and `on_status(line)`. Late ticks are made up as schedule.py says. Every
+        tick is exactly steps_per_tick steps."""
+        end_ns = None if duration_s is None else round(duration_s * 1e9)
+        schedule = TickSchedule(self.wall_clock())
+        next_status = schedule.next_tick + 1.0
+        while end_ns is None or self.core.stamp_ns() - self.core.start_stamp_ns < end_ns:
             now = self.wall_clock()
             if self.core.config.values["lockstep"]:    # commands tick: wait for them
                 self.services.poll()
                 self.take_commands(timeout=LOCKSTEP_WAIT)
-                done = round(self.core.sim.time / config.tick_period)
                 if now >= next_status:
                     self._status(now, on_status)
                     next_status = now + 1.0
                 continue
-            if period > 0 and now < next_tick:
-                self.services.serve_for(next_tick - now)   # issue 15.3: sleep, serving
+            if schedule.wait(now) > 0:
+                self.services.serve_for(schedule.wait(now))   # issue 15.3: sleep, serving
                 now = self.wall_clock()
             self.tick(now)
-            done += 1
-            period = self.core.config.wall_period   # issue 15.3: a parameter set may change it
-            next_tick += period
-            if next_tick < now - max(period, CATCH_UP):  # far behind: restart the schedule
-                next_tick = now
+            # issue 15.3: a parameter set may change the period
+            schedule.ticked(now, self.core.config.wall_period)
             if now >= next_status:
                 self._status(now, on_status)
                 next_status = now + 1.0

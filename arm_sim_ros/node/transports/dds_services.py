@@ -32,6 +32,8 @@ from cyclonedds.util import duration
 from ...interface import split_stamp
 from .. import messages as msg
 from .. import parameter_services as ps
+from ..ros_args import full_node_name, remap_name
+from ..wire_errors import check_topic_name
 from . import dds_service_types as t
 
 REPLY_WAIT = 2.0          # s a reply waits for its client's reply reader to be matched
@@ -143,12 +145,16 @@ class DdsServices:
     the core, then `poll()` from the loop or `serve_for(seconds)` instead of sleeping."""
 
     def __init__(self, participant, name: str, namespace: str = "/", log=None,
-                 clock_ns=time.time_ns):
-        self.node = ps.node_full_name(name, namespace)
+                 clock_ns=time.time_ns, resolve=None):
+        """`resolve(ros_name)`: a service or topic name expanded and remapped as rcl does
+        (`~/reset` is `/<namespace>/<name>/reset` unless a `-r` rule says otherwise)."""
+        self.node = full_node_name(name, namespace)
+        resolve = resolve or (lambda ros_name: remap_name(ros_name, name, namespace))
         self.log, self.clock_ns = log, clock_ns
         self.core = self.parameters = None
         self.events_writer = DataWriter(
-            participant, Topic(participant, "rt/parameter_events", t.ParameterEvent),
+            participant, Topic(participant, msg.ros_topic(resolve("/parameter_events")),
+                               t.ParameterEvent),
             qos=endpoint_qos(t.ParameterEvent, PARAMETERS_DEPTH))
         guid = participant.guid.bytes
         services = (
@@ -164,7 +170,8 @@ class DdsServices:
             ("reset", t.TriggerRequest, t.TriggerResponse, self._reset),
         )
         self.endpoints = [
-            ServiceEndpoint(participant, f"{self.node}/{service}", request, reply, handler,
+            ServiceEndpoint(participant, check_topic_name(resolve(f"~/{service}"), "service name"),
+                            request, reply, handler,
                             SERVICES_DEPTH if service == "reset" else PARAMETERS_DEPTH,
                             cs_id(guid, index + 1))
             for index, (service, request, reply, handler) in enumerate(services)]

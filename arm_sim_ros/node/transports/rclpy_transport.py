@@ -23,6 +23,7 @@ from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stam
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import PARAMETERS, SPECS, ParameterRefused, resolve_parameters, scene_defaults
+from ..schedule import CATCH_UP, TickSchedule
 
 
 def _stamp(stamp_ns: int) -> Time:
@@ -54,13 +55,16 @@ class ArmSimNode(Node):
     def __init__(self, wall_clock=time.monotonic, recorder=None, status=None, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         self._status = status
-        scene = self.declare_parameter(
-            "scene", SPECS["scene"].default,
-            ParameterDescriptor(description=SPECS["scene"].description, read_only=True)).value
-        defaults = scene_defaults(scene)
+        # The scene and the URDF first: every other default derives from them.
+        first = ("scene", "robot_description")
+        defaults = scene_defaults(*(self.declare_parameter(
+            name, SPECS[name].default,
+            ParameterDescriptor(description=SPECS[name].description, read_only=True)).value
+            for name in first))
         for spec in PARAMETERS:
-            if spec.name != "scene":
-                # dynamic typing: `-p publish_rate:=100` (an integer) is still a rate.
+            if spec.name not in first:
+                # dynamic typing: `-p publish_rate:=100` (an integer) is still a rate; an
+                # effect's key the scene does not name is declared without a value (NOT_SET).
                 self.declare_parameter(spec.name, defaults[spec.name], ParameterDescriptor(
                     description=spec.description, dynamic_typing=True))
         config = resolve_parameters({name: self.get_parameter(name).value for name in SPECS})
@@ -78,7 +82,8 @@ class ArmSimNode(Node):
         self.joint_command_subscription = self.create_subscription(
             JointState, values["joint_commands_topic"], self.on_joint_command, 10)
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
-        self.tick_timer = self.create_timer(config.wall_period, self.on_tick)
+        self.schedule = TickSchedule(self.core.wall_clock())
+        self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
 
     def on_command(self, message: Float64MultiArray) -> None:
@@ -93,6 +98,16 @@ class ArmSimNode(Node):
     def _publish_lockstep(self) -> None:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
             self._publish(data)
+
+    def on_timer(self) -> None:
+        """The tick timer: every tick due by the schedule (schedule.py), so a late callback
+        (each spin costs Python time) still keeps real_time_factor; at most CATCH_UP s of
+        ticks per callback, so commands and services are served between."""
+        now = started = self.core.wall_clock()
+        while self.schedule.wait(now) <= 0 and now - started <= CATCH_UP:
+            self.on_tick()
+            self.schedule.ticked(now, self.core.config.wall_period)
+            now = self.core.wall_clock()
 
     def on_tick(self) -> JointStateData | None:
         data = self.core.tick()
@@ -128,7 +143,7 @@ class ArmSimNode(Node):
             return SetParametersResult(successful=False, reason=str(refusal))
         if {"publish_rate", "real_time_factor", "step_size"} & set(changed):
             self.destroy_timer(self.tick_timer)
-            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_tick)
+            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer)
         return SetParametersResult(successful=True)
 
     def destroy_node(self):
@@ -137,12 +152,15 @@ class ArmSimNode(Node):
 
 
 def run(ros_args: list, duration: float | None, status) -> int:
-    """Init, spin until `duration` simulated seconds (or Ctrl-C), shut down."""
+    """Init, spin until the simulated time since start reaches `duration` s (or Ctrl-C),
+    whatever publish_rate, step_size or lockstep become meanwhile; shut down."""
     rclpy.init(args=ros_args)
     node = None
     try:
         node = ArmSimNode(status=status)
-        while rclpy.ok() and (duration is None or node.core.sim.time < duration - 1e-12):
+        end_ns = None if duration is None else round(duration * 1e9)   # simulated time
+        while rclpy.ok() and (end_ns is None or
+                              node.core.stamp_ns() - node.core.start_stamp_ns < end_ns):
             rclpy.spin_once(node, timeout_sec=0.1)
         if status is not None:
             status(node.core.status_line(node.core.real_time_factor(node.core.wall_clock())))

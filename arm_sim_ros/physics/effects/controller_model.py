@@ -16,11 +16,16 @@ from .base import Effect, Parameter
 class ControllerModel(Effect):
     name = "controller_model"
     parameters = (
-        Parameter("gravity", "float", "m/s^2", "non-negative", default=None),
-        Parameter("link_masses", "pair", "kg", "positive", default=None),
-        Parameter("com_distances", "pair", "m", default=None),
-        Parameter("link_lengths", "pair", "m", "positive", default=None),
-        Parameter("payload_mass", "float", "kg", "non-negative", default=None),
+        Parameter("gravity", "float", "m/s^2", "non-negative", default=None,
+                  description="gravity the controller compensates (default: the true one)"),
+        Parameter("link_masses", "pair", "kg", "positive", default=None,
+                  description="link masses it believes (default: the true ones)"),
+        Parameter("com_distances", "pair", "m", default=None,
+                  description="joint-to-COM distances it believes (default: the true ones)"),
+        Parameter("link_lengths", "pair", "m", "positive", default=None,
+                  description="link lengths it believes (default: the true ones)"),
+        Parameter("payload_mass", "float", "kg", "non-negative", default=None,
+                  description="payload it believes held (default: the true one)"),
     )
 
     def __init__(self, true_arm, true_gravity: float, true_payload: float = 0.0, **believed):

@@ -1,0 +1,200 @@
+"""What the accuracy study (accuracy.py) shows: its table per scene, the price list across
+scenes, and the work-precision diagram, one panel per scene."""
+from __future__ import annotations
+
+from math import ceil, isfinite
+from pathlib import Path
+
+from ..usage import UsageError
+
+MARKERS = "osD^v<>pPX*h"
+PANEL_SIZE = (6.4, 4.6)          # inches per panel
+MAX_COLUMNS = 2
+
+
+def _number(value, spec: str, width: int) -> str:
+    return f"{'—':>{width}}" if value is None else f"{value:>{width}{spec}}"
+
+
+def format_table(result: dict) -> str:
+    header = (f"{'method':<28} {'h (s)':>9} {'tol':>7} {'max |state err|':>15} "
+              f"{'energy drift J':>14} {'residual J':>10} {'rhs evals':>9} {'sub-steps':>9} "
+              f"{'CPU s/sim s':>11}")
+    lines = [f"scene {result['scene']}, {result['duration']:g} s, compared every "
+             f"{result['sample_interval']:g} s with {result['reference']}", header,
+             "-" * len(header)]
+    for r in result["runs"]:
+        tol = "" if r["tolerance"] is None else f"{r['tolerance']:.0e}"
+        lines.append(f"{r['series']:<28} {r['step_size']:>9g} {tol:>7} "
+                     f"{r['max_state_error']:>15.3e} {_number(r['energy_drift'], '.3e', 14)} "
+                     f"{_number(r['balance_residual'], '.2e', 10)} "
+                     f"{_number(r['rhs_evaluations'], 'd', 9)} {_number(r['substeps'], 'd', 9)} "
+                     f"{r['cpu_s_per_sim_s']:>11.2e}")
+    lines.append("")
+    for name, o in result["orders"].items():
+        fitted = "n/a (too few points in range)" if o["fitted"] is None else f"{o['fitted']:.2f}"
+        lines.append(f"fitted order {name:<20} {fitted}  (theory {o['theory']})")
+    mujoco = result["peers"].get("mujoco", {})
+    if "version" in mujoco:
+        lines.append(f"MuJoCo {mujoco['version']}: mj_step, one Python call per step"
+                     + "".join(f"; {note}" for note in mujoco["notes"]))
+    if "floor" in mujoco:
+        lines.append(f"MuJoCo's error floor here: {mujoco['floor']:.2e} (its soft constraints "
+                     "follow their own law: the error stops falling with h)")
+    lines += result["notes"]
+    best = cheapest(result, 1e-6)
+    if best:
+        lines.append(f"cheapest run with max state error <= 1e-6: {best['series']} "
+                     f"h={best['step_size']:g}"
+                     + (f" tol={best['tolerance']:g}" if best["tolerance"] else "")
+                     + f" ({best['cpu_s_per_sim_s']:.2e} CPU s per simulated s)")
+    return "\n".join(lines)
+
+
+def cheapest(result: dict, target: float, runs=None):
+    """The run reaching max state error <= target at the least CPU time, or None."""
+    good = [r for r in (result["runs"] if runs is None else runs)
+            if r["max_state_error"] <= target]
+    return min(good, key=lambda r: r["cpu_s_per_sim_s"], default=None)
+
+
+def pick(result: dict, target: float, series) -> dict | None:
+    """Of the runs in `series`: the cheapest at least `target` accurate, else the most
+    accurate one (None if the series did not run)."""
+    runs = [r for r in result["runs"] if series(r["series"])]
+    return cheapest(result, target, runs) or min(runs, key=lambda r: r["max_state_error"],
+                                                 default=None)
+
+
+def price_columns(result: dict, target: float) -> list:
+    """(label, run) per column of the price list for one scene."""
+    at_h = result["runs"][0]["step_size"] if result["runs"] else None
+    as_set = next((r for r in result["runs"] if r["series"].endswith("(scene as set)")), None)
+    at_h = as_set["step_size"] if as_set else at_h
+    mujoco_at_h = [r for r in result["runs"] if r["series"].startswith("mujoco")
+                   and r["step_size"] == at_h]
+    return [("ours as set", as_set),
+            ("ours rk4 + tolerance", pick(result, target, lambda s: s == "rk4 + tolerance")),
+            ("ours dopri5", pick(result, target, lambda s: s == "dopri5")),
+            ("MuJoCo best at the scene's h", min(mujoco_at_h, default=None,
+                                                key=lambda r: r["max_state_error"])),
+            ("MuJoCo cheapest", pick(result, target, lambda s: s.startswith("mujoco")))]
+
+
+def price_list(results: list, target: float) -> str:
+    """Per scene and column: error, µs per simulated second and which run it is."""
+    lines = [f"price list: max |state error| and CPU µs per simulated second; per column the "
+             f"cheapest run reaching {target:g}, else its most accurate", ""]
+    for result in results:
+        lines.append(f"{result['scene']}:")
+        for label, run in price_columns(result, target):
+            if run is None:
+                lines.append(f"  {label:<30} —")
+                continue
+            what = f"h={run['step_size']:g}" + (f" tol={run['tolerance']:g}"
+                                                if run["tolerance"] else "")
+            lines.append(f"  {label:<30} {run['max_state_error']:>9.1e} "
+                         f"{run['cpu_s_per_sim_s'] * 1e6:>10.0f} µs/s  {run['series']} {what}")
+    return "\n".join(lines)
+
+
+def check_plotting() -> None:
+    """Refuse --plot in one line, before any work, when matplotlib cannot be imported."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError as error:
+        raise UsageError(f"--plot needs matplotlib ({error.msg}): pip install "
+                         "matplotlib==3.11.2, or reinstall arm_sim_ros") from None
+
+
+def write_plot(results: list, path) -> None:
+    try:
+        plot(results, str(path))
+    except OSError as error:
+        Path(path).unlink(missing_ok=True)
+        raise UsageError(f"--plot {path}: cannot write: {error.strerror}") from None
+
+
+def plot(results, path: str) -> None:
+    """Work-precision diagram: max state error against CPU time, log-log, one panel per
+    scene; ours solid, MuJoCo dashed, the tolerance sweep and the scene as set marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    results = [results] if isinstance(results, dict) else results
+    columns = min(MAX_COLUMNS, len(results))
+    rows = ceil(len(results) / columns)
+    fig, axes = plt.subplots(rows, columns, squeeze=False, dpi=100,
+                             figsize=(PANEL_SIZE[0] * columns, PANEL_SIZE[1] * rows + 0.9))
+    names = list(dict.fromkeys(r["series"] for result in results for r in result["runs"]))
+    style = {name: _style(name, i) for i, name in enumerate(names)}
+    for ax, result in zip(axes.flat, results):
+        panel(ax, result, style)
+    for ax in list(axes.flat)[len(results):]:
+        ax.axis("off")
+    handles = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    fig.legend(list(handles.values()), list(handles), loc="lower center", fontsize=8,
+               ncol=min(4, len(handles)), frameon=False)
+    fig.suptitle("What accuracy costs: max state error vs CPU time, ours and MuJoCo "
+                 "on the same scenes", fontsize=12)
+    legend_rows = ceil(len(handles) / 4)
+    fig.tight_layout(rect=(0, 0.025 * legend_rows * 2 / rows, 1, 0.97))
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _style(name: str, i: int) -> dict:
+    if name.startswith("mujoco"):
+        return {"linestyle": "--", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
+                "linewidth": 1.2, "alpha": 0.85}
+    if name.endswith("(scene as set)"):
+        return {"linestyle": "none", "marker": "*", "markersize": 13, "color": "black"}
+    if name.endswith("+ tolerance"):
+        return {"linestyle": "-", "marker": "s", "markersize": 5, "linewidth": 2.2,
+                "color": "crimson"}
+    return {"linestyle": "-", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
+            "linewidth": 1.4}
+
+
+def _label(name: str, run: dict) -> str:
+    if name.startswith("mujoco"):
+        return f"MuJoCo {name[7:]}, h sweep (mj_step)"
+    if name.endswith("(scene as set)"):
+        return "ours as set: scene's h and tolerance (Simulator.step)"
+    if name.endswith("+ tolerance"):
+        return f"ours {name} sweep, scene's h (Simulator.step)"
+    if run["tolerance"] is not None:
+        return f"ours {name}, rtol = atol sweep"
+    return f"ours {name}, h sweep"
+
+
+def panel(ax, result: dict, style: dict) -> None:
+    for name in dict.fromkeys(r["series"] for r in result["runs"]):
+        runs = [r for r in result["runs"] if r["series"] == name
+                and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
+        if not runs:
+            continue
+        label = _label(name, runs[0])
+        ax.loglog([r["cpu_s_per_sim_s"] * 1e6 for r in runs],
+                  [r["max_state_error"] for r in runs], label=label, **style[name])
+        if name.endswith("+ tolerance"):          # which tolerance each point is
+            for r in runs[::2]:
+                ax.annotate(f"{r['tolerance']:g}", (r["cpu_s_per_sim_s"] * 1e6,
+                                                   r["max_state_error"]),
+                            fontsize=6.5, color="crimson", textcoords="offset points",
+                            xytext=(4, 2))
+    floor = result["peers"].get("mujoco", {}).get("floor")
+    if floor:
+        ax.axhline(floor, color="tab:purple", linestyle=":", linewidth=1.5,
+                   label="MuJoCo's floor (soft constraints)")
+        ax.annotate("MuJoCo floor", (0.01, floor), xycoords=("axes fraction", "data"),
+                    xytext=(2, 3), textcoords="offset points", fontsize=7, color="tab:purple")
+    ax.axhline(1e-6, color="grey", linestyle=":", linewidth=1)
+    ax.set_xlabel("CPU µs per simulated second (lower is cheaper)")
+    ax.set_ylabel("max |state error| (rad, rad/s)")
+    ax.set_title(f"{result['scene']} ({result['duration']:g} s)", fontsize=10)
+    ax.grid(True, which="major", alpha=0.4)
