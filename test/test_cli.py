@@ -136,7 +136,7 @@ def test_run_prints_the_error_estimate_with_its_units_and_the_tolerance(capsys):
     line = out.splitlines()[-1]
     assert line == (f"error estimate: latest step {result['error_estimate']:.3e}, accumulated "
                     f"{result['accumulated_error']:.3e} (rad, rad/s: max over q, qd); "
-                    "tolerance 0.002 per s (scaled: |e|/(1+|y|))")
+                    "tolerance 0.002 per s (scaled: max |e_q|, |e_qd|/(1+|qd|))")
     sim = Simulator(load_scene("damped_release").replace(tolerance=0.002))
     sim.run(2.0)
     assert result["accumulated_error"] == sim.accumulated_error > result["error_estimate"] > 0

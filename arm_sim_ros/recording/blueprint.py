@@ -205,7 +205,7 @@ def held_by(snap) -> str:
     if snap.adaptive:
         return f"held by {snap.scene.integrator}'s rtol and atol"
     if snap.tolerance:
-        return f"tolerance {snap.tolerance:g} per s (scaled error |e|/(1+|y|))"
+        return f"tolerance {snap.tolerance:g} per s (scaled error: max |e_q|, |e_qd|/(1+|qd|))"
     return "tolerance 0: estimate only"
 
 

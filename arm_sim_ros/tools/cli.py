@@ -185,7 +185,7 @@ def held_by(scene: Scene) -> str:
     for an embedded pair (dopri5) its rtol and atol."""
     if INTEGRATORS[scene.integrator].adaptive:
         return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
-    return (f"tolerance {scene.tolerance:g} per s (scaled: |e|/(1+|y|))" if scene.tolerance
+    return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))" if scene.tolerance
             else "tolerance 0 (estimate only)")
 
 
