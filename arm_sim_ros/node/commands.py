@@ -101,7 +101,16 @@ class CommandIntake:
                          torque_limit: float, now: float):
         """A sensor_msgs/JointState command (as ros2_control's topic-based hardware interface
         sends them): efforts matched to joints by name, in any order; a joint it does not
-        name keeps its held torque. (refusal reason or None, the new command or None)."""
+        name keeps its held torque. (refusal reason or None, the new command or None).
+        A NaN effort is ros2_control's unset command (its command interfaces hold NaN until
+        a controller writes them): that joint is not commanded, which is no error."""
+        if len(effort) == len(names) and any(e != e for e in effort):
+            kept = [i for i, e in enumerate(effort) if e == e]
+            if not kept:
+                return None, None
+            names, position, velocity, effort = (
+                [values[i] for i in kept] if len(values) == len(effort) else values
+                for values in (list(names), list(position), list(velocity), list(effort)))
         reason = joint_state_refusal(list(names), list(position), list(velocity),
                                      list(effort), list(joint_names))
         if reason is not None:
