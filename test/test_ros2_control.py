@@ -15,7 +15,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from arm_sim_ros.interface import JOINT_NAMES
+from arm_sim_ros.interface import JOINT_NAMES, NODE_NAME
 from arm_sim_ros.node import messages as msg
 from arm_sim_ros.node.parameters import SPECS, resolve_parameters
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
@@ -33,6 +33,12 @@ def test_the_fragment_uses_the_topic_based_system_on_the_nodes_topics():
     assert params["joint_commands_topic"] == "/" + SPECS["joint_commands_topic"].default
     assert params["joint_states_topic"] == "/" + SPECS["joint_states_topic"].default
     assert float(params["trigger_joint_command_threshold"]) < 0    # every effort is sent
+
+
+def test_the_hardware_is_not_named_like_the_node():
+    """controller_manager makes a node of the hardware's name: `arm_sim` there made a second
+    /arm_sim, and `ros2 param` reached whichever answered first (seen on a real one)."""
+    assert BLOCK.tag == "ros2_control" and BLOCK.get("name") not in ("", None, NODE_NAME)
 
 
 def test_the_fragments_joints_are_the_urdfs_with_effort_commands():

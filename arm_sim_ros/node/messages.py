@@ -232,12 +232,12 @@ def default_qos(message_type, depth: int = 10) -> Qos:
                          Policy.History.KeepLast(depth))
 
 
-def discovery_info_qos() -> Qos:
-    """`ros_discovery_info`: reliable, transient-local, keep-last 1 (late joiners see the node)."""
+def discovery_info_qos(history=Policy.History.KeepLast(1)) -> Qos:
+    """`ros_discovery_info`: reliable, transient-local, keep-last 1 (late joiners see the node);
+    read keep-all as rmw_cyclonedds does (keyless: every participant's update is one instance)."""
     return _endpoint_qos(ParticipantEntitiesInfo,
                          Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
-                         Policy.Durability.TransientLocal,
-                         Policy.History.KeepLast(1))
+                         Policy.Durability.TransientLocal, history)
 
 
 PARTICIPANT_QOS = Qos(Policy.Userdata(b"enclave=/;"))

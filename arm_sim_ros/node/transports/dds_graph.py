@@ -1,6 +1,7 @@
 """Who else is on the graph: ros_discovery_info read as `ros2 node list` reads it, so the
 node can say when a second node with its full name appears (two /arm_sim nodes would share
 one joint_states and the same commands without a word)."""
+from cyclonedds.core import Policy
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
@@ -14,7 +15,7 @@ class NameWatch:
         self.log = log
         self.reader = DataReader(
             participant, Topic(participant, "ros_discovery_info", msg.ParticipantEntitiesInfo),
-            qos=msg.discovery_info_qos())
+            qos=msg.discovery_info_qos(Policy.History.KeepAll))
         self.others = set()            # gids of other participants with a node of our name
 
     def check(self) -> None:
