@@ -57,13 +57,14 @@ def record_throughput(messages: int, domain: int) -> tuple[float, int]:
     from cyclonedds.topic import Topic
 
     from arm_sim_ros.node import messages as wire
-    from arm_sim_ros.tools.record import DEFAULT_TOPICS, StopRequest, record
+    from arm_sim_ros.tools.record import DEFAULT_TOPICS, record
+    from arm_sim_ros.tools.signals import StopOnSignals
 
     publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
     listener = wire.make_participant(domain, wire.LOOPBACK_CONFIG)
     writer = DataWriter(publisher, Topic(publisher, "rt/joint_states", wire.JointState),
                         qos=wire.default_qos(wire.JointState))
-    stop, counts = StopRequest(), {}
+    stop, counts = StopOnSignals(), {}
     with tempfile.TemporaryDirectory() as tmp:
         thread = threading.Thread(target=lambda: counts.update(
             record(Path(tmp) / "bag", dict(DEFAULT_TOPICS), listener, stop=stop)))

@@ -7,18 +7,9 @@ as bench_peers builds and steps it (`mj_step` through the Python bindings, one c
 step; hinges about z, no contacts); each keeps the fastest of --repeat runs of --steps
 steps. The runs go in rounds, every row (ours, then MuJoCo's) once per round in an order
 rotated from round to round, so that a noisy moment slows all rows alike. The last row is
-the geared_arm preset itself. The effects in MuJoCo's own terms:
-
-    damping: [d1, d2]                joint damping
-    springs: {stiffness, rest_pos.}  joint stiffness + springref
-    payload: {mass: m}               a body of mass m (no inertia) at the tip of link 2
-    motors: {gear_ratio, rotor_in.}  joint armature N^2 J
-    effort_limits: [e1, e2]          motor actuators, forcelimited forcerange, ctrl = a
-                                     constant torque above the limit (both clamp)
-    motors windings (R, L, k, Vlim)  dcmotor actuators (gear N, motorconst k, resistance R,
-                                     inductance L), ctrl = the driver's voltage, ctrlrange
-                                     = +-Vlim; first order in MuJoCo (see the note printed)
-    controller_model                 none: ours only
+the geared_arm preset itself. The effects in MuJoCo's own terms are mujoco_peer's (the
+table in arm_sim_ros/tools/mujoco_peer.py's docstring); the effort-limit rows ask a constant
+torque above the limits (both simulators clamp it), and controller_model is ours only.
 
 Agreement: both simulators run the row's scene for 1 s at h = 1e-3 from the same state;
 the table gives the largest |q_ours - q_mujoco| and |qd_ours - qd_mujoco| at any step,
@@ -43,14 +34,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
 
-from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
+from bench_core import fastest, time_simulator  # noqa: E402  (best-of-repeats timing)
 
 from arm_sim_ros.physics import model as arm_model  # noqa: E402
 from arm_sim_ros.physics.effects import Motors  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
-from arm_sim_ros.tools.mujoco_peer import (fastest, mujoco_data,  # noqa: E402
-                                           mujoco_model as peer_model)
+from arm_sim_ros.tools import mujoco_peer  # noqa: E402
+from arm_sim_ros.tools.mujoco_peer import mujoco_data, reset  # noqa: E402
 
 STEP = 1e-3              # s: the windings' L/R is 0.53 ms, so h must be this small
 CHECK_SECONDS = 1.0      # agreement run
@@ -103,11 +94,9 @@ ROWS = [
 def mujoco_model(scene):
     """(MjModel, ctrl) of the scene with its effects in MuJoCo's terms (RK4), or (None, why)
     where MuJoCo has no counterpart for one of them (arm_sim_ros.tools.mujoco_peer)."""
-    from arm_sim_ros.tools.mujoco_peer import Unsupported
-
     try:
-        return peer_model(scene, "RK4")
-    except Unsupported as error:
+        return mujoco_peer.mujoco_model(scene, "RK4")
+    except mujoco_peer.Unsupported as error:
         return None, str(error).split(" (")[0]
 
 
@@ -118,10 +107,7 @@ def time_mujoco(model, scene, ctrl, steps: int, repeat: int) -> float:
     step, data = mujoco.mj_step, mujoco_data(model, scene, ctrl)
 
     def run():
-        mujoco.mj_resetData(model, data)
-        data.qpos[:] = scene.initial_positions
-        data.qvel[:] = scene.initial_velocities
-        data.ctrl[:] = ctrl
+        reset(model, data, scene, ctrl)
         for _ in range(steps):
             step(model, data)
     return fastest(run, repeat) / steps * 1e6
@@ -282,7 +268,8 @@ def has_windings(scene) -> bool:
 def scene_of(row: Row, base):
     if row.preset == "release":
         return base.replace(**row.overrides)
-    return load_scene(row.preset).replace(step_size=STEP, duration=CHECK_SECONDS, **row.overrides)
+    return load_scene(row.preset).replace(step_size=STEP, duration=CHECK_SECONDS, tolerance=0.0,
+                                          **row.overrides)
 
 
 def measure(rows, base, steps: int, repeat: int, before: BeforeTree | None):
@@ -330,7 +317,8 @@ def main() -> None:
         sys.exit("bench_effects needs MuJoCo: pip install .[bench] (mujoco==4.0.0)")
 
     started = time.perf_counter()
-    base = load_scene("release").replace(step_size=STEP, duration=CHECK_SECONDS)
+    # tolerance 0: the scheme alone, so that ours and MuJoCo's RK4 take the same steps
+    base = load_scene("release").replace(step_size=STEP, duration=CHECK_SECONDS, tolerance=0.0)
     before = BeforeTree(args.before, args.steps) if args.before is not None else None
     try:
         damped_us, results = measure(ROWS, base, args.steps, args.repeat, before)

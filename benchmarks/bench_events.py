@@ -17,26 +17,25 @@ Tables printed (timings are wall-clock on whatever else the machine runs: noisy)
 from __future__ import annotations
 
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
-from arm_sim_ros.physics.scene import load_scene
-from arm_sim_ros.physics.simulator import Simulator
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
+
+from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
+
+from arm_sim_ros.physics.scene import load_scene  # noqa: E402
+from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 
 
 def per_step(scene, seconds: float, repeat: int = 3):
-    """(best us per step over `repeat` runs, switch counts of the last). The same simulator
-    is reset between runs: each mode's right-hand side is compiled once, on first use."""
-    best, sim = float("inf"), Simulator(scene)
-    for _ in range(repeat + 1):
-        sim.reset()
-        steps = scene.steps_for(seconds)
-        start = time.perf_counter()
-        for _ in range(steps):
-            sim.step()
-        best = min(best, (time.perf_counter() - start) / steps * 1e6)
-    return best, dict(sim.switch_events)
+    """(best us per step over `repeat` runs after a warm-up, switch counts of the last). The
+    same simulator is reset between runs: each mode's right-hand side is compiled once, on
+    first use."""
+    sim = Simulator(scene)
+    return time_simulator(sim, scene.steps_for(seconds), repeat + 1), dict(sim.switch_events)
 
 
 def cost_table(quick: bool) -> None:

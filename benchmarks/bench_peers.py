@@ -11,13 +11,21 @@ at every publish time; times are the fastest of --repeat runs; ratios are agains
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
+
 import numpy as np
 
-from arm_sim_ros.physics.batch import Batch
-from arm_sim_ros.physics.scene import load_scene
-from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.tools.accuracy import reference, sample_times
-from arm_sim_ros.tools.mujoco_peer import fastest, mjcf
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
+
+from bench_core import fastest  # noqa: E402  (the benchmarks' best-of-repeats timing)
+
+from arm_sim_ros.physics.batch import Batch  # noqa: E402
+from arm_sim_ros.physics.scene import load_scene  # noqa: E402
+from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
+from arm_sim_ros.tools.accuracy import reference, sample_times  # noqa: E402
+from arm_sim_ros.tools.mujoco_peer import mujoco_data, mujoco_model, reset  # noqa: E402
+
 
 def ours_single(scene, steps: int):
     sim = Simulator(scene)
@@ -35,14 +43,12 @@ def ours_single(scene, steps: int):
 def mujoco_single(scene, integrator: str, steps: int):
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(mjcf(scene, integrator))
-    data = mujoco.MjData(model)
+    model, ctrl = mujoco_model(scene, integrator)
+    data = mujoco_data(model, scene, ctrl)
     states = []
 
     def run():
-        mujoco.mj_resetData(model, data)
-        data.qpos[:] = scene.initial_positions
-        data.qvel[:] = scene.initial_velocities
+        reset(model, data, scene, ctrl)
         states[:] = [(*data.qpos, *data.qvel)]
         for _ in range(steps):
             mujoco.mj_step(model, data)
@@ -97,8 +103,8 @@ def batch_table(scene, arms: int, mujoco_arms: int, steps: int, repeat: int) -> 
         batch.run(steps)
     ours_s = fastest(ours, repeat)
 
-    model = mujoco.MjModel.from_xml_string(mjcf(scene, "RK4"))
-    data = mujoco.MjData(model)
+    model, ctrl = mujoco_model(scene, "RK4")
+    data = mujoco_data(model, scene, ctrl)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     initial = np.zeros((mujoco_arms, mujoco.mj_stateSize(model, spec)))
     mujoco.mj_getState(model, data, initial[0], spec)

@@ -60,7 +60,7 @@ def limit_of(sim):
 
 def worst_bound(sim, y, h):
     """The simulator's mechanism: sub-steps from lambda_max over all elbow angles."""
-    return sim._advance(sim._rhs, y, h), sim.substeps
+    return sim.accuracy.check(sim._rhs, y, h), sim.substeps
 
 
 def current_bound(sim, y, h):

@@ -6,22 +6,17 @@ default tolerance) versus the plain planned step with no check, and the price li
 """
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
-from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE
-from arm_sim_ros.physics.scene import Scene, load_scene
-from arm_sim_ros.physics.simulator import Simulator
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
 
+from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
 
-def per_step(sim, steps=2000, repeats=5) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        sim.reset()
-        start = time.perf_counter()
-        for _ in range(steps):
-            sim.step()
-        best = min(best, time.perf_counter() - start)
-    return best / steps * 1e6
+from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE  # noqa: E402
+from arm_sim_ros.physics.scene import Scene, load_scene  # noqa: E402
+from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 
 
 def interleaved(sims, steps=200, repeats=40) -> list[float]:
@@ -29,7 +24,7 @@ def interleaved(sims, steps=200, repeats=40) -> list[float]:
     best = [float("inf")] * len(sims)
     for _ in range(repeats):
         for i, sim in enumerate(sims):
-            best[i] = min(best[i], per_step(sim, steps, 1))
+            best[i] = min(best[i], time_simulator(sim, steps, 1))
     return best
 
 
@@ -63,9 +58,9 @@ def main() -> None:
             sim = Simulator(Scene(initial_positions=(0.0, 0.5), initial_velocities=(100.0, 0.0),
                                   gravity=0.0, step_size=h, tolerance=tolerance))
             e0, drift = sim.energy(sim.state), [0.0]
-            start = time.perf_counter()
+            start = time.process_time()
             sim.run(5.0, lambda s: drift.__setitem__(0, max(drift[0], abs(s.energy(s.state) - e0))))
-            cpu = time.perf_counter() - start
+            cpu = time.process_time() - start
             print(f"  {h:>6g} {tolerance:>10g} {sim.substeps_taken:>10d} {cpu:>7.2f} "
                   f"{drift[0] / e0:>11.2e} {sim.accumulated_error:>12.3g}")
 

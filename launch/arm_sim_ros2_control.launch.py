@@ -7,8 +7,8 @@ effort controller, plus robot_state_publisher.
         "{data: [20.0, 5.0]}"
     ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py rviz:=true   # and rviz2
 
-Needs ros2_control, ros2_controllers (effort_controllers, joint_state_broadcaster) and
-topic_based_hardware_interfaces. The node takes the controller's JointState efforts on
+Needs ros2_control, ros2_controllers (forward_command_controller, joint_state_broadcaster)
+and topic_based_hardware_interfaces. The node takes the controller's JointState efforts on
 joint_commands and publishes joint_states, which the hardware interface reads.
 """
 import os
@@ -39,9 +39,7 @@ def generate_launch_description():
     arm_sim = Node(
         package='arm_sim_ros', executable='arm_sim_node', name='arm_sim', output='screen',
         parameters=[{'scene': ParameterValue(LaunchConfiguration('scene'), value_type=str),
-                     'policy': 'command', 'command_timeout': 0.0,
-                     'joint_states_topic': 'joint_states',
-                     'joint_commands_topic': 'joint_commands'}],
+                     'policy': 'command', 'command_timeout': 0.0}],   # default topics
     )
     control = Node(
         package='controller_manager', executable='ros2_control_node', output='screen',

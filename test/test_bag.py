@@ -226,11 +226,12 @@ def start_recording(path, topics, participant):
     """Readers made on this thread (cyclonedds must not build a topic type on two threads at
     once), the recording loop on another; returns a function that stops it like Ctrl-C
     and returns the counts."""
-    from arm_sim_ros.tools.record import StopRequest, TopicRecorder
+    from arm_sim_ros.tools.record import TopicRecorder
+    from arm_sim_ros.tools.signals import StopOnSignals
 
     writer = BagWriter(path)
     recorder = TopicRecorder(participant, topics, writer)
-    stop = StopRequest()
+    stop = StopOnSignals()
     thread = threading.Thread(target=recorder.run, args=(stop,))
     thread.start()
 

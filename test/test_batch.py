@@ -5,10 +5,9 @@ import pytest
 from arm_sim_ros.physics import batch as batch_module
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics.batch import Batch
-from arm_sim_ros.physics.integrators import RK4, compile_step
 from arm_sim_ros.physics.scene import SceneError, load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.physics.stability import substepping
+from test_effort_events import mode_free
 
 RNG = np.random.default_rng(7)
 
@@ -163,21 +162,10 @@ def test_batch_equals_single_arm_for_every_preset_and_every_state_entry(name):
             # order at the crossing (measured 5e-5 at h = 0.01 on effort_limited_hold). The
             # batch is that mode-free step exactly.
             assert np.max(np.abs(got - expected)) <= 1e-3, (name, i, got - expected)
-            expected = mode_free(sim, scene.replace(initial_positions=tuple(q[i]),
-                                                    initial_velocities=tuple(qd[i])), 100)
+            start, _ = full_state(scene.replace(initial_positions=tuple(q[i]),
+                                                initial_velocities=tuple(qd[i])), 0, command)
+            expected = np.array(mode_free(start, 100))
         assert np.max(np.abs(got - expected)) <= 1e-12, (name, i, got - expected)
-
-
-def mode_free(sim, scene, steps):
-    """The arm's state after `steps` steps of its mode-free right-hand side (MIN/MAX clamps
-    in every RK stage, as Batch evaluates them) with the simulator's sub-step plan."""
-    advance = substepping(compile_step(RK4, len(sim.channels), extra=len(sim.extra)),
-                          sim.substeps)
-    y = ((*scene.initial_positions, *scene.initial_velocities)
-         + (0.0,) * (len(sim.extra) + len(sim.channels)))
-    for _ in range(steps):
-        y = advance(sim.dynamics.function, y, scene.step_size)
-    return np.array(y)
 
 
 @pytest.mark.parametrize("policy", ["gravity_compensation", "frozen_gravity"])

@@ -9,6 +9,7 @@ Byte-level tests pin the format against hand-written CDR and the rosbags library
 is sourced, rclpy's own clients and the ros2 CLI talk to the node too.
 """
 import json
+import logging
 import math
 import os
 import shutil
@@ -27,16 +28,16 @@ from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from arm_sim_ros.node import messages as msg, parameter_services as ps
-from arm_sim_ros.node.parameters import PARAMETERS, SPECS
+from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.parameters import PARAMETERS, SPECS, resolve_parameters
 from arm_sim_ros.node.ros_args import node_identity, parse_ros_args
 from arm_sim_ros.node.transports import dds_service_types as t
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from arm_sim_ros.node.transports.dds_services import (cs_id, endpoint_qos, from_value, to_value,
                                                       user_data_value)
 from arm_sim_ros.physics.effects import MAPPING_EFFECTS
+from test_node_dds import CONFIG, TIMEOUT, start as start_node, wait_until
 
-TIMEOUT = 5.0
-CONFIG = msg.loopback_config(f"arm_sim_test_dds_services_{os.getpid()}")
 U64 = (1 << 64) - 1
 
 SERVICES = {   # service -> (request, response) wire types
@@ -74,10 +75,8 @@ class Client:
         return self.reader
 
     def wait_for_service(self):
-        deadline = time.monotonic() + TIMEOUT
-        while not (msg.matched(self.writer) and msg.matched(self.reader)):
-            assert time.monotonic() < deadline, f"{self.name} not discovered"
-            time.sleep(0.001)
+        wait_until(lambda: msg.matched(self.writer) and msg.matched(self.reader),
+                   f"{self.name} not discovered")
 
     def send(self, **fields) -> int:
         self.seq += 1
@@ -102,11 +101,25 @@ class Client:
         return reply
 
 
+OPEN = []   # the nodes a test started: closed after it
+
+
+@pytest.fixture(autouse=True)
+def close_nodes():
+    yield
+    while OPEN:
+        OPEN.pop().close()
+
+
+def opened(node):
+    OPEN.append(node)
+    return node
+
+
 def start(domain_id, **parameters):
-    node = DdsArmSimNode(parameters, domain_id=domain_id, config=CONFIG,
-                         start_stamp_ns=5_000_000_000, wall_clock=lambda: 100.0)
-    participant = msg.make_participant(domain_id, CONFIG)
-    return node, participant
+    """A node (test_node_dds.start) and the participant of a peer that talks to it."""
+    node, peer = start_node(domain_id, **parameters)
+    return opened(node), peer.participant
 
 
 def clients(participant, *services):
@@ -154,15 +167,23 @@ def test_list_get_types_and_describe_answer_as_rclpy_does():
     assert damping.floating_point_range == [] and damping.integer_range == []
 
 
+def test_scene_and_robot_description_are_read_only_as_the_rclpy_transport_declares_them():
+    log = logging.getLogger("test_read_only")
+    services = ps.ParameterServices(ArmSimCore(resolve_parameters({}), log), log)
+    assert [(d.name, d.read_only, d.dynamic_typing) for d in services.describe(
+        ["scene", "robot_description", "damping"])] == [
+        ("scene", True, False), ("robot_description", True, False), ("damping", False, True)]
+    for name in ("scene", "robot_description"):
+        assert services.set_atomically([(name, "")]) == ps.SetResult(
+            False, f"Trying to set a read-only parameter: {name}.")
+
+
 def test_set_applies_each_parameter_on_its_own_and_publishes_an_event():
     node, p = start(121)
     setter, getter = clients(p, "set_parameters", "get_parameters")
     events = DataReader(p, Topic(p, "rt/parameter_events", t.ParameterEvent),
                         qos=endpoint_qos(t.ParameterEvent, 1000))
-    deadline = time.monotonic() + TIMEOUT
-    while not msg.matched(events):
-        assert time.monotonic() < deadline
-        time.sleep(0.001)
+    wait_until(lambda: msg.matched(events), "parameter_events not matched")
     results = setter.call(node, parameters=[
         param("damping", ps.DOUBLE, 0.3),
         param("publish_rate", ps.INTEGER, 50),            # an integer is a fine double
@@ -272,15 +293,14 @@ def test_a_reply_waits_until_its_clients_reply_reader_is_matched():
     matched; here it is kept pending meanwhile instead of being lost."""
     node, p = start(125)
     client = Client(p, "get_parameters", reply_reader=False)
-    deadline = time.monotonic() + TIMEOUT
-    while not msg.matched(client.writer):
-        assert time.monotonic() < deadline
-        time.sleep(0.001)
+    wait_until(lambda: msg.matched(client.writer), "the request writer not matched")
     seq = client.send(names=["gravity"])
-    deadline = time.monotonic() + TIMEOUT
-    while not node.services.pending:
-        assert time.monotonic() < deadline
+
+    def kept_pending():
         node.services.poll()
+        return node.services.pending
+
+    wait_until(kept_pending, "the request was not kept pending", poll=0)
     client.open_reply_reader()
     reply, = client.replies(node)
     assert reply.seq == seq and not node.services.pending
@@ -290,15 +310,10 @@ def test_a_request_whose_client_has_left_is_dropped():
     node, p = start(129)
     client = clients(p, "get_parameters")
     client.send(names=["gravity"])
-    deadline = time.monotonic() + TIMEOUT
-    while not node.services.waitset.wait(0):          # the request has arrived
-        assert time.monotonic() < deadline
-        time.sleep(0.001)
+    wait_until(lambda: node.services.waitset.wait(0), "the request did not arrive")
     client.writer = client.reader = None              # cyclonedds deletes both
-    deadline = time.monotonic() + TIMEOUT
-    while node.services.endpoints[1].reader.get_matched_publications():
-        assert time.monotonic() < deadline
-        time.sleep(0.001)
+    wait_until(lambda: not node.services.endpoints[1].reader.get_matched_publications(),
+               "the client did not leave")
     assert node.services.poll() == 0 and node.services.pending == []
 
 
@@ -312,12 +327,13 @@ def test_a_request_the_node_cannot_answer_is_logged_and_the_node_goes_on(caplog,
     monkeypatch.setattr(node.services.parameters, "list", broken)
     seq = lister.send(prefixes=[], depth=0)
     said = f"/arm_sim/list_parameters: request {seq} not answered: RuntimeError('boom')"
-    deadline = time.monotonic() + TIMEOUT
+
+    def logged():
+        node.services.poll()
+        return any(said in r.getMessage() for r in caplog.records)
+
     with caplog.at_level("ERROR"):
-        while not any(said in r.getMessage() for r in caplog.records):
-            assert time.monotonic() < deadline, "the failed request was not logged"
-            node.services.poll()
-            time.sleep(0.001)
+        wait_until(logged, "the failed request was not logged")
     assert from_value(getter.call(node, names=["gravity"]).values[0]) == 9.81
     node.tick()
     assert lister.reader.take(N=10) == []
@@ -325,8 +341,9 @@ def test_a_request_the_node_cannot_answer_is_logged_and_the_node_goes_on(caplog,
 
 def test_a_request_in_a_spinning_node_is_answered_while_it_sleeps_between_ticks():
     import threading
-    node = DdsArmSimNode({"publish_rate": 5.0, "step_size": 0.01}, domain_id=126, config=CONFIG)
-    p = msg.make_participant(126, CONFIG)
+    node = opened(DdsArmSimNode({"publish_rate": 5.0, "step_size": 0.01}, domain_id=135,
+                                config=CONFIG))
+    p = msg.make_participant(135, CONFIG)
     client = clients(p, "get_parameters")
     answered = []
 
@@ -352,9 +369,9 @@ def test_discovery_info_lists_every_service_endpoint_under_the_node():
     node, p = start(127)
     reader = DataReader(p, Topic(p, "ros_discovery_info", msg.ParticipantEntitiesInfo),
                         qos=msg.discovery_info_qos())
-    deadline, infos = time.monotonic() + TIMEOUT, []
-    while not infos and time.monotonic() < deadline:
-        infos = [s for s in reader.take(N=5) if isinstance(s, msg.ParticipantEntitiesInfo)]
+    infos = wait_until(lambda: [s for s in reader.take(N=5)
+                                if isinstance(s, msg.ParticipantEntitiesInfo)],
+                       "the node's ros_discovery_info did not arrive", poll=0)
     entry, = infos[0].node_entities_info_seq
     readers = {bytes(g.data) for g in entry.reader_gid_seq}
     writers = {bytes(g.data) for g in entry.writer_gid_seq}
@@ -388,7 +405,7 @@ def test_discovery_info_lists_every_service_endpoint_under_the_node():
 
 
 def test_service_names_follow_the_namespace():
-    node = DdsArmSimNode({}, domain_id=128, config=CONFIG, namespace="/robot")
+    node = opened(DdsArmSimNode({}, domain_id=128, config=CONFIG, namespace="/robot"))
     assert node.services.node == "/robot/arm_sim"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
         f"rq/robot/arm_sim/{s}Request" for s in SERVICES}
@@ -398,13 +415,13 @@ def remapped(domain_id, *rules):
     """A node started with `--ros-args -r RULE ...`, as arm_sim_node reads them."""
     name, namespace, remap = node_identity(parse_ros_args(
         [arg for rule in rules for arg in ("-r", rule)])["remap"])
-    node = DdsArmSimNode({}, domain_id=domain_id, config=CONFIG, name=name,
-                         namespace=namespace, remap=remap)
+    node = opened(DdsArmSimNode({}, domain_id=domain_id, config=CONFIG, name=name,
+                                namespace=namespace, remap=remap))
     return node, msg.make_participant(domain_id, CONFIG)
 
 
 def test_a_remapped_node_serves_its_parameters_and_reset_under_its_new_name():
-    node, p = remapped(124, "__node:=other", "__ns:=/ns")
+    node, p = remapped(133, "__node:=other", "__ns:=/ns")
     assert node.services.node == "/ns/other"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
         f"rq/ns/other/{s}Request" for s in SERVICES}
@@ -417,7 +434,7 @@ def test_a_remapped_node_serves_its_parameters_and_reset_under_its_new_name():
 
 
 def test_service_and_event_names_follow_remap_rules_as_topic_names_do():
-    node, _ = remapped(125, "arm_sim:__node:=left", "~/reset:=/restart_left",
+    node, _ = remapped(134, "arm_sim:__node:=left", "~/reset:=/restart_left",
                        "other:__node:=ignored", "/parameter_events:=/left_events")
     topics = {e.reader.topic.name for e in node.services.endpoints}
     assert "rq/restart_leftRequest" in topics and "rq/left/get_parametersRequest" in topics

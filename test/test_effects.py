@@ -228,17 +228,11 @@ class FirstPrinciples:
         """Called at each located switch (for tests that time them)."""
 
 
-def simulated(scene, duration=T, command=None):
-    sim = Simulator(scene)
-    if command is not None:
-        sim.set_command(*command)
-    worst = sim.run(duration)
-    return sim, worst
-
-
 def compare(scene, command=(0.0, 0.0)):
     """Largest deviation of the state and of the books (relative to the energy scale)."""
-    sim, _ = simulated(scene, command=command)
+    sim = Simulator(scene)
+    sim.set_command(*command)
+    sim.run(T)
     ref = FirstPrinciples(scene, command)
     y = ref.solve(T)
     n = 4 + len(sim.extra)

@@ -74,8 +74,9 @@ HOLDS = {
     "release_rk38": (load_scene("release").replace(integrator="rk38"), 2.0),
     "release_midpoint_estimate_only": (load_scene("release").replace(integrator="midpoint",
                                                                      tolerance=0.0), 2.0),
-    # switching scenes (events.py): smooth steps on the schedule, every step with a
-    # located switch or an engaged compliant limit estimated piece by piece
+    # switching scenes (events.py): smooth steps on the schedule, every step starting with a
+    # compliant limit engaged estimated piece by piece, and, when steps are not split,
+    # every step with a located switch
     "stick_slip": (load_scene("stick_slip"), 2.0),
     "compliant_limit": (load_scene("compliant_limit"), 2.0),
     "effort_limited_hold": (load_scene("effort_limited_hold"), 2.0),
@@ -170,6 +171,43 @@ def test_every_integrator_and_switching_scene_reports_an_estimate():
         assert sim.error_estimate >= 0 and sim.accumulated_error > 0, name
     refused = Simulator(load_scene("release").replace(damping=1e9))   # the plan refuses
     assert isnan(refused.error_estimate) and isnan(refused.accumulated_error)
+
+
+@pytest.mark.parametrize("name", ["compliant_limit", "stick_slip", "geared_arm"])
+def test_substeps_taken_counts_the_sub_steps_the_switching_stepper_adds(name):
+    """events.py splits steps itself: while a compliant limit is engaged (substeps_for) and
+    the rest of a step after a located switch. A step with a switch in it is a split step
+    and counts every sub-step it took; other steps count the plan's (0 for plain steps)."""
+    sim = Simulator(load_scene(name).replace(tolerance=0.0))
+    planned = sim.substeps if sim.substeps > 1 else 0
+    taken = switches = split = 0
+    for _ in range(sim.scene.steps_for(2.0)):
+        mode = sim.switching.mode          # None until the first step finds it
+        engaged = mode is not None and bool(mode[2] or mode[3])
+        sim.step()
+        grown, taken = sim.substeps_taken - taken, sim.substeps_taken
+        switched, switches = sum(sim.switch_events.values()) > switches, sum(
+            sim.switch_events.values())
+        if switched or engaged:
+            assert grown >= max(2, planned + 1), (name, sim.steps, grown)
+            split += 1
+        else:
+            assert grown == planned, (name, sim.steps, grown)
+    assert split > 0 and taken > planned * sim.steps
+
+
+@pytest.mark.parametrize("name", ["release", "stick_slip", "compliant_limit", "limit_impact",
+                                  "payload_release", "geared_arm", "moving_frozen_gravity"])
+def test_the_accumulated_error_never_goes_down(name):
+    """A sum of estimates >= 0: steps between checks count at half the latest estimate, the
+    least the mean the next check books them at can be."""
+    sim = Simulator(load_scene(name))
+    before = sim.accumulated_error
+    for _ in range(sim.scene.steps_for(2.0)):
+        sim.step()
+        assert sim.accumulated_error >= before, (name, sim.steps, before, sim.accumulated_error)
+        before = sim.accumulated_error
+    assert before > 0.0
 
 
 def test_a_negative_tolerance_is_refused():

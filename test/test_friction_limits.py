@@ -1,9 +1,10 @@
 """Friction with exact stiction, hard and compliant joint limits, and the events that switch
 them (physics/events.py): each case named after what it shows.
 
-The convergence cases compare with an independent hybrid reference written here: the
-arm's equations from the link parameters, friction and limits as modes, every switch
-located by scipy's solve_ivp(events=...) on DOP853 at rtol = atol = 1e-12.
+The convergence cases compare with an independent hybrid reference: the arm of
+test_effects.FirstPrinciples (no code shared with arm_sim_ros.physics) with friction and
+limits as modes written here, every switch located by scipy's solve_ivp(events=...) on
+DOP853 at rtol = atol = 1e-12.
 """
 import math
 
@@ -15,36 +16,21 @@ from arm_sim_ros.physics import model
 from arm_sim_ros.physics.scene import Scene, SceneError, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.tools import cli
-
-
-def run(sim, seconds, each=None):
-    for _ in range(sim.scene.steps_for(seconds)):
-        sim.step()
-        if each is not None:
-            each(sim)
-    return sim
-
-
-def losses(sim):
-    return sim.books(sim.state)[1]
+from test_effects import FirstPrinciples
 
 
 # --- Independent reference ---------------------------------------------------------------
 
-class Reference:
-    """Two-link arm with friction and hard limits; modes per joint: +1/-1 sliding, 0 stuck
-    (friction), "lower"/"upper" resting; free (None) without friction."""
+class Reference(FirstPrinciples):
+    """test_effects.FirstPrinciples' arm (no code shared with arm_sim_ros.physics) with
+    friction and hard limits; modes per joint: +1/-1 sliding, 0 stuck (friction),
+    "lower"/"upper" resting; free (None) without friction."""
 
     TOL = 1e-12
     REST_SPEED = 1e-4     # the documented rule: a bounce slower than this ends at rest
 
     def __init__(self, scene):
-        (l1, _), (m1, m2), (r1, r2), (i1, i2) = (scene.link_lengths, scene.link_masses,
-                                                 scene.com_distances, scene.com_inertias)
-        self.d = i2 + m2 * r2 ** 2
-        self.a, self.b = i1 + m1 * r1 ** 2 + m2 * l1 ** 2 + self.d, m2 * l1 * r2
-        self.k1, self.k2, self.gravity = m1 * r1 + m2 * l1, m2 * r2, scene.gravity
-        self.torque = np.array(scene.constant_torque if scene.policy == "constant" else (0, 0))
+        super().__init__(scene)
         fr = scene.friction
         self.fc = np.array(fr["coulomb"]) if fr else None
         self.fs = np.array(fr.get("static", fr["coulomb"])) if fr else None
@@ -52,29 +38,22 @@ class Reference:
         lim = scene.joint_limits
         self.lower, self.upper = (np.array(lim["lower"]), np.array(lim["upper"])) if lim else (None, None)
         self.e = (lim.get("restitution") or 0.0) if lim else None
-        self.impact_times = []
 
     def mass(self, q):
-        c = math.cos(q[1])
-        return np.array([[self.a + 2 * self.b * c, self.d + self.b * c], [self.d + self.b * c, self.d]])
-
-    def energy(self, x):
-        q, u = x[:2], x[2:4]
-        return 0.5 * u @ self.mass(q) @ u + self.gravity * (
-            self.k1 * math.sin(q[0]) + self.k2 * math.sin(q[0] + q[1]))
+        (m11, m12, m22), _ = self.mass_matrix_and_bias(q, (0.0, 0.0))
+        return np.array([[m11, m12], [m12, m22]])
 
     def slide(self, u, i):
         if self.vs == 0.0:
             return self.fc[i]
         return self.fc[i] + (self.fs[i] - self.fc[i]) * math.exp(-(u[i] / self.vs) ** 2)
 
-    def solve(self, x, mode):
+    def constrained(self, x, mode):
         """(accelerations, holding torques, friction power) in `mode`."""
         q, u = x[:2], x[2:4]
-        h = self.b * math.sin(q[1])
-        f = np.array([h * (2 * u[0] * u[1] + u[1] ** 2), -h * u[0] ** 2]) + self.torque
-        g2 = self.gravity * self.k2 * math.cos(q[0] + q[1])
-        f -= [self.gravity * self.k1 * math.cos(q[0]) + g2, g2]
+        m = self.mass(q)
+        # every smooth torque (drive, gravity, velocity products, ...) as M q̈ of the free arm
+        f = m @ self.rhs(x[:4], {})[2:4]
         power = 0.0
         for i in (0, 1):
             if mode[i] in (1, -1):
@@ -82,7 +61,7 @@ class Reference:
                 power += mode[i] * self.slide(u, i) * u[i]
         fixed = [i for i in (0, 1) if mode[i] in (0, "lower", "upper")]
         moving = [i for i in (0, 1) if i not in fixed]
-        m, acc = self.mass(q), np.zeros(2)
+        acc = np.zeros(2)
         if moving:
             acc[moving] = np.linalg.solve(m[np.ix_(moving, moving)], f[moving])
         lam = m @ acc - f
@@ -95,10 +74,12 @@ class Reference:
             if mode[i] in (1, -1):
                 out.append((lambda t, x, i=i, s=mode[i]: s * x[2 + i], "stop", i))
             elif mode[i] == 0:
-                out.append((lambda t, x, i=i: self.fs[i] - abs(self.solve(x, mode)[1][i]), "slip", i))
+                out.append((lambda t, x, i=i: self.fs[i] - abs(self.constrained(x, mode)[1][i]),
+                            "slip", i))
             elif mode[i] in ("lower", "upper"):
                 sign = 1 if mode[i] == "lower" else -1
-                out.append((lambda t, x, i=i, s=sign: s * self.solve(x, mode)[1][i], "release", i))
+                out.append((lambda t, x, i=i, s=sign: s * self.constrained(x, mode)[1][i],
+                            "release", i))
             if self.lower is not None and mode[i] not in (0, "lower", "upper"):
                 out.append((lambda t, x, i=i: self.upper[i] - x[i], "impact", i))
                 out.append((lambda t, x, i=i: x[i] - self.lower[i], "impact", i))
@@ -108,7 +89,7 @@ class Reference:
 
     def settle(self, x, mode):
         for _ in range(4):
-            lam = self.solve(x, mode)[1]
+            lam = self.constrained(x, mode)[1]
             bad = [i for i in (0, 1) if mode[i] == 0 and abs(lam[i]) > self.fs[i]]
             if not bad:
                 return mode
@@ -121,11 +102,10 @@ class Reference:
             x[2 + i] = 0.0
             mode[i] = 0
         elif kind == "slip":
-            mode[i] = -int(np.sign(self.solve(x, mode)[1][i]))
+            mode[i] = -int(np.sign(self.constrained(x, mode)[1][i]))
         elif kind == "release":
             mode[i] = 0 if self.fc is not None else None
         elif kind == "impact":
-            self.impact_times.append(None)
             v, minv = x[2 + i], np.linalg.inv(self.mass(x[:2]))
             e = self.e if self.e * abs(v) >= self.REST_SPEED else 0.0
             impulse = -(1 + e) * v / minv[i, i]
@@ -146,7 +126,7 @@ class Reference:
         t, self.switches = 0.0, []
 
         def rhs(t, x):
-            acc, _, power = self.solve(x, mode)
+            acc, _, power = self.constrained(x, mode)
             return [x[2], x[3], acc[0], acc[1], power, 0.0]
 
         while t < duration:
@@ -174,7 +154,7 @@ def test_an_arm_at_rest_inside_the_friction_cone_never_moves_bit_for_bit_over_10
     assert abs(g[0]) < 20.0 and abs(g[1]) < 6.0                 # inside the cone
     sim = Simulator(scene)
     start = sim.state
-    run(sim, 10.0, lambda s: s.state[:4] == start[:4] or pytest.fail(f"moved at {s.time}"))
+    sim.run(10.0, lambda s: s.state[:4] == start[:4] or pytest.fail(f"moved at {s.time}"))
     assert sim.state[:4] == start[:4] and sim.switch_events == {}
     assert sim.residual() == 0.0
 
@@ -183,7 +163,8 @@ def test_an_arm_at_rest_inside_the_friction_cone_never_moves_bit_for_bit_over_10
 def test_a_constant_torque_just_under_breakaway_holds_the_joint_just_over_moves_it(fraction, moves):
     scene = Scene(gravity=0.0, policy="constant", constant_torque=(fraction * 2.0, 0.0),
                   friction={"coulomb": [1.5, 1.0], "static": [2.0, 1.5]})
-    sim = run(Simulator(scene), 1.0)
+    sim = Simulator(scene)
+    sim.run(1.0)
     assert (sim.state[0] != 0.0) == moves
     assert (sim.state[:4] == (0.0, 0.0, 0.0, 0.0)) == (not moves)
     if moves:
@@ -219,7 +200,8 @@ def test_a_hard_limit_is_never_passed(h):
     def check(sim):
         for i in (0, 1):
             assert low[i] - 1e-9 <= sim.state[i] <= high[i] + 1e-9, (sim.time, sim.state)
-    sim = run(Simulator(scene), 3.0, check)
+    sim = Simulator(scene)
+    sim.run(3.0, check)
     assert sim.switch_events["impact"] > 3
 
 
@@ -329,7 +311,7 @@ def test_a_stiff_compliant_limit_is_stable_and_passive_at_every_step(h, k):
     def record(s):
         residuals.append(s.residual())
         lowest.append(s.state[0])
-    run(sim, seconds, record)
+    sim.run(seconds, record)
     assert sim.fault is None and all(math.isfinite(v) for v in sim.state)
     assert sim.switch_events["enter"] >= 1
     # Passive: no energy from nothing, E(t) - E(0) + losses stays <= RK4's own error on the
@@ -385,7 +367,7 @@ def test_switches_are_counted_and_reported_without_flooding():
 ])
 def test_bad_parameters_are_refused_in_one_line(overrides, words):
     with pytest.raises(SceneError) as refused:
-        Scene(**overrides) if "initial_positions" not in overrides else Scene().replace(**overrides)
+        Scene().replace(**overrides)
     assert words in str(refused.value) and "\n" not in str(refused.value)
 
 

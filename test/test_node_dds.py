@@ -30,6 +30,16 @@ TIMEOUT = 5.0   # generous bound on loopback delivery; a passing test waits ~1 m
 CONFIG = msg.loopback_config(f"arm_sim_test_node_dds_{os.getpid()}")
 
 
+def wait_until(condition, what: str, poll: float = 0.001):
+    """Poll `condition()` until it is true (returning its value); fail saying `what` did not
+    happen within TIMEOUT."""
+    deadline = time.monotonic() + TIMEOUT
+    while not (value := condition()):
+        assert time.monotonic() < deadline, what
+        time.sleep(poll)
+    return value
+
+
 class FakeClock:
     def __init__(self):
         self.now = 100.0
@@ -53,10 +63,8 @@ class Peer:
                                       qos=deep(msg.DiagnosticArray))
 
     def wait_matched(self):
-        deadline = time.monotonic() + TIMEOUT
-        while not (msg.matched(self.commands) and msg.matched(self.joint_states)):
-            assert time.monotonic() < deadline, "node not discovered on loopback"
-            time.sleep(0.001)
+        wait_until(lambda: msg.matched(self.commands) and msg.matched(self.joint_states),
+                   "node not discovered on loopback")
 
     def send(self, node, data):
         """Publish one command and let the node's subscription take it (as a callback would)."""

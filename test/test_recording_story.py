@@ -20,10 +20,9 @@ from arm_sim_ros.node.recorder_link import RecorderLink
 from arm_sim_ros.physics.integrators import INTEGRATORS
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.recording import blueprint, readback, telemetry
-from arm_sim_ros.recording.bag import TYPESTORE, BagWriter, joint_state
-from arm_sim_ros.tools import cli, inspect as inspect_tool
-from arm_sim_ros.usage import ArgumentParser, UsageError
+from arm_sim_ros.recording import blueprint, readback, readouts, telemetry
+from arm_sim_ros.recording.bag import TYPESTORE
+from arm_sim_ros.tools import cli
 
 from test_telemetry import Log, blueprint_rows, read_back, record, scalars
 
@@ -49,7 +48,7 @@ def at(entity, timeline):
 
 # --- 1. timelines that line up ----------------------------------------------------------
 
-def test_a_node_recording_and_a_bag_of_its_joint_states_share_one_clock(tmp_path):
+def test_a_node_recording_is_on_the_clock_of_its_joint_states(tmp_path):
     """Every JointState the node publishes (stamp_ns) is a row of the recording at that
     ros_time with the same positions, across a reset too; sim_time runs beside it."""
     path = tmp_path / "node.rrd"
@@ -57,31 +56,18 @@ def test_a_node_recording_and_a_bag_of_its_joint_states_share_one_clock(tmp_path
                                              "publish_rate": 50.0})
     core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0,
                                 start_stamp_ns=STAMP_ORIGIN)
-    if core.recorder.stamp_origin_ns is None:
-        core.finish()
-        pytest.skip("node/core.py does not pass start_stamp_ns to RecorderLink yet "
-                    "(/tmp/helper17_requests.md 2a)")
-    bag = BagWriter(tmp_path / "bag")
-    bag.add_topic("/joint_states", "sensor_msgs/msg/JointState")
     published = []
     for k in range(40):
         if k == 25:
             core.reset()
-        js = core.tick(0.0)
-        published.append(js)
-        bag.write("/joint_states", js.stamp_ns, joint_state(js.stamp_ns, js.position,
-                                                            js.velocity, js.effort))
+        published.append(core.tick(0.0))
     core.finish()
-    bag.close()
     columns = read_back(path)["joints/angle"]
     rows = {}   # a reset's initial row shares the stamp of the run's last step: keep both
     for stamp, angle in zip(columns["ros_time"], columns["Scalars:scalars"]):
         rows.setdefault(stamp, []).append(angle)
-    states = bag_joint_states(tmp_path / "bag")
-    assert len(states) == 40
-    for (log_ns, stamp, position), js in zip(states, published):
-        assert log_ns == stamp == js.stamp_ns
-        assert rows[stamp][-1 if stamp != published[24].stamp_ns else 0] == position
+    for js in published:
+        assert rows[js.stamp_ns][-1 if js is not published[24] else 0] == js.position
     assert len(rows[published[24].stamp_ns]) == 2      # the old run's end, the reset's start
     offsets = {r - s for r, s in zip(columns["ros_time"], columns["sim_time"])}
     assert offsets == {STAMP_ORIGIN}
@@ -222,17 +208,8 @@ def test_the_links_tick_story_has_real_time_factor_and_late_ticks(tmp_path):
 # --- 5. read it back: arm-sim inspect -----------------------------------------------------
 
 def inspect_main(argv):
-    """`arm-sim inspect` as cli.main runs it (through cli once it is registered there)."""
-    if "arm_sim_ros.tools.inspect" in cli.SUBCOMMAND_MODULES:
-        return cli.main(["inspect", *argv])
-    parser = ArgumentParser(prog="arm-sim")
-    inspect_tool.add_parser(parser.add_subparsers(dest="command", parser_class=ArgumentParser))
-    try:
-        args = parser.parse_args(["inspect", *argv])
-        return args.func(args)
-    except UsageError as error:
-        print(f"arm-sim: error: {error}", file=__import__("sys").stderr)
-        return 2
+    """`arm-sim inspect ...`, as cli.main runs it."""
+    return cli.main(["inspect", *argv])
 
 
 def test_inspect_prints_the_properties_and_the_series_as_csv(tmp_path, capsys):
@@ -271,9 +248,6 @@ def test_inspect_refuses_a_missing_or_foreign_file_in_one_line(tmp_path, capsys)
 
 
 def test_inspect_is_an_arm_sim_subcommand():
-    if "arm_sim_ros.tools.inspect" not in cli.SUBCOMMAND_MODULES:
-        pytest.skip("arm-sim inspect is not registered in cli.SUBCOMMAND_MODULES yet "
-                    "(/tmp/helper17_requests.md 1)")
     assert "inspect" in cli.build_parser().format_help()
 
 
@@ -310,6 +284,17 @@ def test_an_arm_other_than_the_urdfs_gets_no_3d_view(tmp_path):
     names = {r.get("ViewBlueprint:display_name", [None])[0]
              for r in blueprint_rows(tmp_path / "other.rrd").values()}
     assert not [n for n in names if n and "3D" in n]
+
+
+def test_a_payload_is_no_link_the_scene_still_gets_the_urdf_arm_in_3d(tmp_path):
+    """payload_release folds its payload into link 2 for the physics; the URDF's links are
+    the scene's bare links, so the 3D arm is shown."""
+    record(load_scene("payload_release").replace(duration=0.02), tmp_path / "payload.rrd")
+    _, statics, temporal = readback.read(tmp_path / "payload.rrd")
+    assert "arm3d/two_link_arm" in statics and "arm3d/joints/elbow_joint" in temporal
+    names = {r.get("ViewBlueprint:display_name", [None])[0]
+             for r in blueprint_rows(tmp_path / "payload.rrd").values()}
+    assert [n for n in names if n and "3D" in n]
 
 
 # --- 7. can I trust this run? -------------------------------------------------------------
@@ -400,3 +385,52 @@ def test_a_scene_whose_steps_are_not_estimated_shows_no_estimate_and_says_so(tmp
     queries = [query for query, _, _ in views.values() if query]
     assert ["accuracy/local_error"] not in queries and ["accuracy/substeps"] in queries
     assert any("no error estimate" in name for name in views)
+
+
+def test_dopri5_says_its_rtol_and_atol_hold_the_error_and_shows_no_sub_steps(tmp_path):
+    """An embedded pair adapts its own step: what holds its error is rtol and atol, in the
+    start line, the local error pane and arm-sim run's text alike; it has no sub-steps to
+    count, so no sub-steps series or pane."""
+    scene = load_scene("damped_release").replace(integrator="dopri5", duration=0.1)
+    path = tmp_path / "dopri5.rrd"
+    record(scene, path)
+    held = f"rtol {scene.rtol:g}, atol {scene.atol:g} (dopri5)"
+    assert readouts.held_by(scene) == held
+    columns = read_back(path)
+    assert "accuracy/local_error" in columns and "accuracy/substeps" not in columns
+    (start,) = [t for t in columns["events"]["TextLog:text"] if t.startswith("scene ")]
+    assert held in start and "tolerance" not in start
+    views = blueprint_tree(path)["views"]
+    assert [name for name in views if name.startswith("Local error")][0].endswith(held)
+    assert not [name for name in views if "ub-steps" in name]
+    assert ["accuracy/substeps"] not in [query for query, _, _ in views.values()]
+
+
+def residual_titles(path) -> list[str]:
+    """The residual pane's title in each blueprint the recording holds."""
+    reader, titles = rr.chunk.RrdReader(str(path)), []
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            if "ViewBlueprint:display_name" in batch.schema.names:
+                titles += [v[0] for v in batch.column("ViewBlueprint:display_name").to_pylist()
+                           if v and v[0].startswith("Energy balance residual")]
+    return titles
+
+
+def test_a_new_simulator_with_another_e0_gets_a_residual_title_with_its_own(tmp_path):
+    """The same effects from another initial state: the trust view's residual title names
+    the new run's E(0), in a blueprint sent for it."""
+    first = Simulator(load_scene("release"))
+    second = Simulator(load_scene("release").replace(initial_positions=(0.3, 0.2)))
+    path = tmp_path / "two_runs.rrd"
+    recorder = telemetry.make_recorder(first.scene, path=str(path))
+    for sim in (first, second):
+        recorder.start(sim)
+        for _ in range(5):
+            sim.step()
+            recorder.step(sim)
+    recorder.finish(second)
+    assert first.initial_energy != second.initial_energy
+    assert sorted(title.partition("E(0) = ")[2] for title in residual_titles(path)) == [
+        f"{sim.initial_energy:.6g} J)" for sim in (first, second)]

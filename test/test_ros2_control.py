@@ -19,7 +19,7 @@ from arm_sim_ros.interface import JOINT_NAMES, NODE_NAME
 from arm_sim_ros.node import messages as msg
 from arm_sim_ros.node.parameters import SPECS, resolve_parameters
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
-from test_node_dds import CONFIG, TIMEOUT
+from test_node_dds import CONFIG, TIMEOUT, wait_until
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = ET.fromstring((ROOT / "urdf" / "two_link_arm.ros2_control.xml").read_text())
@@ -55,10 +55,12 @@ def test_the_fragments_joints_are_the_urdfs_with_effort_commands():
 def test_the_controllers_drive_both_joints_at_the_nodes_rate():
     config = yaml.safe_load((ROOT / "config" / "ros2_controllers.yaml").read_text())
     manager = config["controller_manager"]["ros__parameters"]
-    assert manager["effort_controller"]["type"] == "effort_controllers/JointGroupEffortController"
+    assert manager["effort_controller"]["type"] == \
+        "forward_command_controller/ForwardCommandController"   # JointGroupEffortController's
     assert manager["joint_state_broadcaster"]["type"] == \
         "joint_state_broadcaster/JointStateBroadcaster"
-    assert config["effort_controller"]["ros__parameters"]["joints"] == list(JOINT_NAMES)
+    effort = config["effort_controller"]["ros__parameters"]
+    assert effort["joints"] == list(JOINT_NAMES) and effort["interface_name"] == "effort"
     assert manager["update_rate"] == SPECS["publish_rate"].default
 
 
@@ -72,7 +74,9 @@ def test_the_launch_files_node_parameters_are_the_nodes():
     assert set(given) <= set(SPECS)
     literal = {k: ast.literal_eval(v) for k, v in given.items() if isinstance(v, ast.Constant)}
     config = resolve_parameters(literal | {"scene": "gravity_compensation_at_rest"})
+    # the fragment's topics (above) are the node's, as the launch file starts it
     assert config.values["joint_commands_topic"] == "joint_commands"
+    assert config.values["joint_states_topic"] == "joint_states"
 
 
 def test_the_hardware_interfaces_qos_and_messages_drive_the_node():
@@ -85,10 +89,8 @@ def test_the_hardware_interfaces_qos_and_messages_drive_the_node():
         Policy.Durability.Volatile, Policy.History.KeepLast(1)))
     states = DataReader(p, Topic(p, "rt/joint_states", msg.JointState), qos=Qos(
         Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5)))
-    deadline = time.monotonic() + TIMEOUT
-    while not (msg.matched(commands) and msg.matched(states)):
-        assert time.monotonic() < deadline, "the hardware interface's endpoints did not match"
-        time.sleep(0.001)
+    wait_until(lambda: msg.matched(commands) and msg.matched(states),
+               "the hardware interface's endpoints did not match")
     commands.write(msg.JointState(header=msg.Header(stamp=msg.Time(12, 0)),
                                   name=list(JOINT_NAMES), effort=[3.0, -1.0]))
     assert node.take_commands(timeout=TIMEOUT) == 1 and node.core.command == (3.0, -1.0)

@@ -2,6 +2,7 @@
 joint_commands (ros2_control's topic-based hardware interface), /clock with the stamps of
 joint_states, lockstep (one tick per command), topics chosen by parameters. Loopback,
 domains 140-149."""
+import logging
 import time
 
 import pytest
@@ -10,11 +11,13 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_typestore
 
+from arm_sim_ros.interface import OK
 from arm_sim_ros.node import messages as msg
-from arm_sim_ros.node.parameters import ParameterRefused
-from arm_sim_ros.node.transports.dds_clock import CLOCK_TYPE_HASH, Clock, clock_qos
+from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.schedule import TickSchedule
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
-from test_node_dds import CONFIG, TIMEOUT, Peer, start
+from test_node_dds import CONFIG, TIMEOUT, FakeClock, Peer, start, wait_until
 
 
 def reader(peer, topic, message_type, qos=None):
@@ -26,10 +29,7 @@ def reader(peer, topic, message_type, qos=None):
 def joint_command_writer(peer, topic="rt/joint_commands"):
     p = peer.participant
     writer = DataWriter(p, Topic(p, topic, msg.JointState), qos=msg.default_qos(msg.JointState))
-    deadline = time.monotonic() + TIMEOUT
-    while not msg.matched(writer):
-        assert time.monotonic() < deadline, "joint_commands not matched"
-        time.sleep(0.001)
+    wait_until(lambda: msg.matched(writer), "joint_commands not matched")
     return writer
 
 
@@ -42,28 +42,35 @@ def stamp(m):
 
 
 def test_the_clock_type_hash_is_rosidls():
-    assert get_typestore(Stores.ROS2_JAZZY).hash_rihs01("rosgraph_msgs/msg/Clock") == CLOCK_TYPE_HASH
+    assert get_typestore(Stores.ROS2_JAZZY).hash_rihs01("rosgraph_msgs/msg/Clock") == \
+        msg.TYPE_HASHES[msg.ROS_TYPE_NAMES[msg.Clock]]
+
+
+def clock_reader(node, peer):
+    """A /clock reader, matched with the node's /clock writer."""
+    clock = reader(peer, "rt/clock", msg.Clock)
+    wait_until(lambda: msg.matched(clock) and msg.matched(node.clock_writer),
+               "the /clock reader did not match")
+    return clock
 
 
 def test_clock_is_published_every_tick_with_the_joint_state_stamp():
     node, peer = start(140, publish_rate=100.0)
-    clock = reader(peer, "rt/clock", Clock, qos=clock_qos())
-    time.sleep(0.05)                                # discovery of the clock reader
+    clock = clock_reader(node, peer)
     for _ in range(5):
         node.tick()
     states = peer.read(peer.joint_states, 5, msg.JointState)
-    clocks = peer.read(clock, 5, Clock)
+    clocks = peer.read(clock, 5, msg.Clock)
     assert [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks] == [stamp(m) for m in states]
 
 
 def test_publish_clock_false_publishes_no_clock():
     node, peer = start(141, publish_clock=False)
-    clock = reader(peer, "rt/clock", Clock, qos=clock_qos())
-    time.sleep(0.05)
+    clock = clock_reader(node, peer)
     node.tick()
     peer.read(peer.joint_states, 1, msg.JointState)
     time.sleep(0.05)
-    assert [s for s in clock.take(N=10) if isinstance(s, Clock)] == []
+    assert [s for s in clock.take(N=10) if isinstance(s, msg.Clock)] == []
 
 
 def test_joint_state_effort_commands_drive_the_arm_by_joint_name():
@@ -88,6 +95,40 @@ def test_lockstep_ticks_once_per_command_and_never_on_its_own():
     states = peer.read(peer.joint_states, 3, msg.JointState)
     assert node.core.sim.time == pytest.approx(0.03)               # three ticks, no more
     assert [stamp(m) for m in states] == [5_000_000_000 + 10_000_000 * (k + 1) for k in range(3)]
+
+
+def lockstep_core(clock, **parameters):
+    return ArmSimCore(resolve_parameters({"policy": "command", "lockstep": True} | parameters),
+                      logging.getLogger("test_lockstep"), wall_clock=clock, start_stamp_ns=0)
+
+
+def test_lockstep_ticks_are_never_late_however_far_apart_the_commands_come():
+    clock = FakeClock()
+    core = lockstep_core(clock, publish_rate=100.0)
+    for _ in range(10):
+        clock.now += 0.05                       # a command every 50 ms: five periods apart
+        core.on_command([0.5, 0.0])
+    assert len(core.take_lockstep_states()) == 10 and core.late_ticks == 0
+    assert core.diagnostics().level == OK
+
+
+@pytest.mark.parametrize("real_time_factor", [0.0, 1.0])
+def test_the_tick_timer_of_a_lockstep_node_returns_at_once(real_time_factor):
+    """The rclpy transport's timer callback (TickSchedule.run_due): in lockstep the commands
+    tick, so it returns without looping (it spun for CATCH_UP at real_time_factor 0)."""
+    clock, reads = FakeClock(), []
+
+    def wall_clock():                           # each read takes a millisecond
+        reads.append(clock.now)
+        clock.now += 0.001
+        return clock.now
+
+    core = lockstep_core(wall_clock, real_time_factor=real_time_factor)
+    schedule = TickSchedule(clock.now)
+    reads.clear()
+    assert schedule.run_due(core, core.tick) == 0 and reads == []
+    core.config = core.config.with_changes({"lockstep": False})
+    assert schedule.run_due(core, core.tick) >= 1 and core.sim.steps > 0   # free-running
 
 
 def test_topics_are_parameters_chosen_at_start():
@@ -116,12 +157,12 @@ def test_a_second_node_with_the_same_name_is_warned_about(caplog):
     second = DdsArmSimNode({}, domain_id=145, config=CONFIG, wall_clock=lambda: 0.0,
                            start_stamp_ns=0, log=logging.getLogger("second"))
     with caplog.at_level(logging.WARNING):
-        deadline = time.monotonic() + TIMEOUT
-        while not [r for r in caplog.records if "another node named /arm_sim" in r.message]:
-            assert time.monotonic() < deadline, "the twin was not noticed"
+        def noticed():
             first.name_watch.check()
             second.name_watch.check()
-            time.sleep(0.01)
+            return [r for r in caplog.records if "another node named /arm_sim" in r.message]
+
+        wait_until(noticed, "the twin was not noticed", poll=0.01)
         warned = len(caplog.records)
         first.name_watch.check()
         assert len(caplog.records) == warned               # once per twin, not every second

@@ -15,6 +15,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from arm_sim_ros.outputs import check_output
+from arm_sim_ros.physics.scene import preset_names
 from arm_sim_ros.tools import cli
 from arm_sim_ros.tools.progress import Progress
 from arm_sim_ros.usage import UsageError
@@ -177,8 +178,7 @@ def test_a_run_that_diverged_while_finite_says_so_and_exits_1(capsys, argv):
     assert abs(result["residual"]) < 1.0 + abs(result["total"])
 
 
-@pytest.mark.parametrize("scene", sorted(__import__("arm_sim_ros.physics.scene",
-                                                    fromlist=["preset_names"]).preset_names()))
+@pytest.mark.parametrize("scene", sorted(preset_names()))
 def test_no_preset_trips_the_divergence_guard(capsys, scene):
     assert cli.main(["run", "--scene", scene, "--duration", "5", "--json"]) == 0
     assert strict_json(capsys.readouterr().out)["fault"] is None

@@ -11,8 +11,9 @@ from arm_sim_ros.physics import model
 from arm_sim_ros.physics.integrators import RK4, ButcherTableau, compile_step
 from arm_sim_ros.physics.scene import Scene, load_scene
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.physics.stability import (RK4_REAL_LIMIT, SUBSTEP_FRACTION, real_stability_limit,
-                                   stability_polynomial, stiffness, worst_stiffness)
+from arm_sim_ros.physics.stability import (RK4_REAL_LIMIT, SUBSTEP_FRACTION,
+                                           inverse_mass_eigenvalue, real_stability_limit,
+                                           stability_polynomial, stiffness, worst_stiffness)
 
 DAMPED = load_scene("damped_release")
 RODS = DAMPED.arm
@@ -83,6 +84,16 @@ def test_worst_stiffness_bounds_every_elbow_angle(lengths, masses, coms, inertia
     m11, m12, m22 = model.mass_matrix(arm, (0.0, 0.0))
     assert stiffness(arm, 0.0) == pytest.approx(
         max(np.linalg.eigvalsh(np.linalg.inv([[m11, m12], [m12, m22]]))), rel=1e-12)
+
+
+def test_the_inverse_mass_eigenvalue_of_arrays_is_each_arms():
+    """batch.py asks it of every arm at once (numpy's hypot): the same numbers."""
+    arms = [model.ArmParameters(*p) for p in (((1, 1), (1, 1), (0.5, 0.5), (1 / 12, 1 / 12)),
+                                               ((0.3, 2.0), (5.0, 0.01), (0.1, 1.9), (0.0, 0.0)))]
+    for q2 in (0.0, math.pi):
+        m11, m12, m22 = (np.array(m) for m in zip(*(model.mass_matrix(a, (0.0, q2)) for a in arms)))
+        assert list(inverse_mass_eigenvalue(m11, m12, m22, np.hypot)) == pytest.approx(
+            [stiffness(a, q2) for a in arms], rel=1e-15)
 
 
 # --- bit-for-bit where RK4 is stable -----------------------------------------------------------

@@ -19,10 +19,12 @@ import rerun as rr
 
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics import model
-from arm_sim_ros.recording import blueprint, readouts, sinks, telemetry, writer
+from arm_sim_ros.recording import blueprint, readback, readouts, sinks, telemetry, writer
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.node import parameters as node_params
+from arm_sim_ros.node import core as node_core, parameters as node_params
+
+from test_error_estimate import spin   # 100 rad/s about the shoulder, gravity off
 
 TOL = 1e-12
 # Every scene's entities; each effect adds its own (SCENES), and an absent one adds none.
@@ -444,11 +446,11 @@ def test_batches_sent_along_the_way_read_back_the_same(tmp_path, monkeypatch):
     monkeypatch.setattr(telemetry, "FILE_PERIOD", 1e9)
     scene = load_scene("damped_release").replace(step_size=0.002, duration=0.5)
     sends = []
-    original = telemetry.RerunRecorder._send
-    monkeypatch.setattr(telemetry.RerunRecorder, "_send",
-                        lambda self, sim, runs, states, *rest: (
+    original = writer.BatchWriter.send
+    monkeypatch.setattr(writer.BatchWriter, "send",
+                        lambda self, snap, runs, states, *rest: (
                             sends.append(sum(steps for _, _, steps in runs)),
-                            original(self, sim, runs, states, *rest)))
+                            original(self, snap, runs, states, *rest)))
     samples, _ = record(scene, tmp_path / "batched.rrd")
     assert sends == [37] * 6 + [251 - 37 * 6]
     columns = read_back(tmp_path / "batched.rrd")
@@ -558,14 +560,8 @@ def test_readouts_energies_and_torque_equal_the_simulators(name):
 
 def effects_document(path):
     """The recording's static effects document: (text, media type)."""
-    reader = rr.chunk.RrdReader(str(path))
-    for chunk in reader.stream(store=reader.recordings()[0]):
-        batch = chunk.to_record_batch()
-        if chunk.entity_path.lstrip("/") == blueprint.EFFECTS_PATH and chunk.is_static:
-            text, media_type = (batch.column(f"TextDocument:{name}")[0].as_py()
-                                for name in ("text", "media_type"))
-            return text[0], media_type[0]
-    return None
+    document = readback.read(path)[1][blueprint.EFFECTS_PATH]
+    return document["TextDocument:text"], document["TextDocument:media_type"]
 
 
 @pytest.mark.parametrize("name, rows, absent", [
@@ -676,7 +672,7 @@ class Log:
         return lambda text: self.lines.append((level, text))
 
 
-def run_node(node_core, config, ticks, command=None):
+def run_node(config, ticks, command=None):
     """Tick an in-process node beside a Simulator of its scene, sending command(k) before
     tick k if given; return its log, the core's samples and the recording read back."""
     log = Log()
@@ -695,11 +691,10 @@ def run_node(node_core, config, ticks, command=None):
 
 
 def test_the_node_writes_a_recording_in_process(tmp_path):
-    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "node.rrd"
     config = node_params.resolve_parameters({"scene": "damped_release", "rerun_path": str(path),
                                            "publish_rate": 50.0})
-    log, samples, columns = run_node(node_core, config, ticks=25)
+    log, samples, columns = run_node(config, ticks=25)
     assert_equals_core(columns, samples)
     assert columns[KINETIC]["sim_time"][-1] == round(0.5 * 1e9)
     assert any("start" in text for text in columns["events"]["TextLog:text"])
@@ -709,12 +704,11 @@ def test_the_node_writes_a_recording_in_process(tmp_path):
 def test_the_node_records_each_ticks_command_with_its_steps(tmp_path):
     """The node hands over a tick's states at once (step_batch); a command taken between
     ticks holds for the next tick's steps, as in the core."""
-    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "commanded.rrd"
     config = node_params.resolve_parameters({
         "scene": "release", "policy": "command_gravity_compensation", "damping": 0.2,
         "rerun_path": str(path), "publish_rate": 20.0, "command_timeout": 0.0})
-    _, samples, columns = run_node(node_core, config, ticks=12,
+    _, samples, columns = run_node(config, ticks=12,
                                    command=lambda k: [math.sin(k), 0.3 * k - 1.0])
     assert config.steps_per_tick == 5
     assert {WORK, TORQUE, "books/loss/dissipated"} <= set(columns)
@@ -770,7 +764,6 @@ def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_orde
     """The node collects steps over ticks (RECORD_EVERY) before handing them over; an event,
     a new command, a reset and a hold each hand over what was collected first, so every
     row, command and text line lands at its own step."""
-    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "ticks.rrd"
     config = node_params.resolve_parameters({"scene": "release", "rerun_path": str(path),
                                            "command_timeout": 0.0})
@@ -809,7 +802,6 @@ def test_the_node_at_one_step_a_tick_records_every_step_events_and_reset_in_orde
 
 
 def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
-    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "held.rrd"
     config = node_params.resolve_parameters({"scene": "release", "rerun_path": str(path),
                                            "initial_velocities": [1e200, 1e200]})
@@ -826,15 +818,47 @@ def test_a_node_that_holds_records_the_refused_tick_then_stops(tmp_path):
                for text in columns["events"]["TextLog:text"])
 
 
+def test_a_live_parameter_change_keeps_the_nodes_timeline_and_books(tmp_path):
+    """A payload grasped and the damping changed while the node runs (live parameters):
+    the recording goes on at the next step, on the JointState stamps, and its books keep
+    counting from the run's E(0), so they still sum to the residual."""
+    path, origin = tmp_path / "live.rrd", 1_763_900_000_123_456_789
+    config = node_params.resolve_parameters({
+        "scene": "damped_release", "initial_positions": [0.7, 0.3],
+        "initial_velocities": [1.0, -0.5], "rerun_path": str(path), "publish_rate": 50.0})
+    core = node_core.ArmSimCore(config, Log(), wall_clock=lambda: 0.0, start_stamp_ns=origin)
+    published = []
+    for k in range(30):
+        if k == 10:
+            core.set_parameters({"payload.mass": 0.5})
+        if k == 20:
+            core.set_parameters({"damping": 0.3})
+        published.append(core.tick(0.0))
+    core.finish()
+    columns = read_back(path)
+    h_ns = round(config.scene.step_size * 1e9)
+    angle = columns["joints/angle"]
+    assert angle["sim_time"] == [k * h_ns for k in range(61)]         # no jump, no repeat
+    assert angle["ros_time"] == [origin + t for t in angle["sim_time"]]
+    rows = dict(zip(angle["ros_time"], angle["Scalars:scalars"]))
+    assert all(rows[js.stamp_ns] == js.position for js in published)
+    residual = at_times(columns["energy/balance_residual"])
+    books = defaultdict(float)
+    for entity in columns:
+        kind = entity.split("/")[1] if entity.startswith("books/") else None
+        for t, value in at_times(columns[entity]).items() if kind else ():
+            books[t] += -value if kind == "input" else value
+    assert set(books) == set(residual)
+    assert max(abs(books[t] - residual[t]) for t in residual) <= TOL
+    assert len(columns["books/input/payload_exchange"]["sim_time"]) == 40   # from the grasp on
+
+
+def at_times(entity) -> dict:
+    """{sim_time: the first scalar} of an entity read back."""
+    return {t: v[0] for t, v in zip(entity["sim_time"], entity["Scalars:scalars"])}
+
+
 # --- the error books: how far each step may be off, and what holding it cost -------------
-
-def spin(h, tolerance=2e-3, duration=0.5):
-    """100 rad/s about the shoulder, elbow bent 0.5 rad, gravity off: a tolerance splits
-    its steps (physics/accuracy.py)."""
-    return load_scene("release").replace(initial_positions=(0.0, 0.5), gravity=0.0,
-                                         initial_velocities=(100.0, 0.0), step_size=h,
-                                         tolerance=tolerance, duration=duration)
-
 
 def books_of(scene, steps):
     """{step: (error_estimate, accumulated_error, sub-steps the step took)} of a Simulator
@@ -852,7 +876,7 @@ def books_of(scene, steps):
 def test_every_steps_error_books_are_recorded_as_the_simulator_has_them(tmp_path, tolerance):
     """recorder.step(sim) after every step: each step's local error estimate, the sum of
     them and the sub-steps it took, at its own simulated time, exactly."""
-    scene = spin(0.01, tolerance)
+    scene = spin(0.01, tolerance=tolerance, duration=0.5)   # 2e-3 splits its steps
     record(scene, tmp_path / "spin.rrd")
     columns, expected = read_back(tmp_path / "spin.rrd"), books_of(scene, 50)
     for path, k in ((LOCAL, 0), (ACCUMULATED, 1), (SUBSTEPS, 2)):
@@ -863,7 +887,7 @@ def test_every_steps_error_books_are_recorded_as_the_simulator_has_them(tmp_path
         assert substeps.max() > 1
     else:                # estimate only: plain steps, each with a larger error
         assert set(substeps) == {1.0}
-        split = books_of(spin(0.01), 50)
+        split = books_of(spin(0.01, tolerance=2e-3), 50)
         assert scalars(columns[LOCAL]).max() > max(v[0] for v in split.values())
 
 
@@ -877,7 +901,7 @@ def test_arm_sim_run_samples_the_error_books_every_few_steps_exactly(tmp_path, c
                      "--set", "initial_velocities=100,0", "--set", "tolerance=0.002",
                      "--duration", "1", "--rerun", str(path)]) == 0
     capsys.readouterr()
-    columns, expected = read_back(path), books_of(spin(0.01), 100)
+    columns, expected = read_back(path), books_of(spin(0.01, tolerance=2e-3), 100)
     steps = [round(t / 10_000_000) for t in columns[LOCAL]["sim_time"]]
     every = telemetry.BOOKS_EVERY
     assert set(range(every, 101, every)) <= set(steps) and steps[-1] == 100
@@ -899,14 +923,13 @@ def test_arm_sim_run_samples_the_error_books_every_few_steps_exactly(tmp_path, c
 def test_the_node_records_its_error_books_and_each_ticks_sub_steps(tmp_path):
     """The node samples the books as arm-sim run does; a tick's sub-steps are its steps':
     exactly steps x the count while it holds (a fast spin under a tolerance)."""
-    node_core = pytest.importorskip("arm_sim_ros.node.core")
     path = tmp_path / "spin_node.rrd"
     config = node_params.resolve_parameters({
         "scene": "release", "gravity": 0.0, "initial_positions": [0.0, 0.5],
         "initial_velocities": [100.0, 0.0], "tolerance": 2e-3, "step_size": 0.002,
         "publish_rate": 100.0, "rerun_path": str(path)})
     assert config.steps_per_tick == 5
-    run_node(node_core, config, ticks=30)
+    run_node(config, ticks=30)
     columns = read_back(path)
     expected = books_of(config.scene, 150)
     steps = [round(t / 2_000_000) for t in columns[LOCAL]["sim_time"]]

@@ -84,10 +84,8 @@ class CommandIntake:
         self.received += 1
         reason = refusal(data, torque_limit)
         if reason is not None:
-            self.refused += 1
-            self.warnings.warning("refused commands", f"refused torque command: {reason}; holding "
-                                  f"{list(self.value)} (refused so far: {self.refused})")
-            return reason, None
+            return self._refuse("refused commands", f"refused torque command: {reason}; holding "
+                                f"{list(self.value)}", reason)
         if policy not in COMMAND_POLICIES:
             self.warnings.warning("ignored commands", f"policy {policy!r} ignores {COMMAND_TOPIC}; "
                                   "set policy to command to drive the arm")
@@ -104,25 +102,25 @@ class CommandIntake:
         name keeps its held torque. (refusal reason or None, the new command or None).
         A NaN effort is ros2_control's unset command (its command interfaces hold NaN until
         a controller writes them): that joint is not commanded, which is no error."""
-        if len(effort) == len(names) and any(e != e for e in effort):
-            kept = [i for i, e in enumerate(effort) if e == e]
-            if not kept:
-                return None, None
-            names, position, velocity, effort = (
-                [values[i] for i in kept] if len(values) == len(effort) else values
-                for values in (list(names), list(position), list(velocity), list(effort)))
         reason = joint_state_refusal(list(names), list(position), list(velocity),
                                      list(effort), list(joint_names))
         if reason is not None:
             self.received += 1
-            self.refused += 1
-            self.warnings.warning("refused joint commands", f"refused JointState command: "
-                                  f"{reason} (refused so far: {self.refused})")
-            return reason, None
+            return self._refuse("refused joint commands", f"refused JointState command: "
+                                f"{reason}", reason)
+        commanded = [(name, tau) for name, tau in zip(names, effort) if tau == tau]   # not NaN
+        if not commanded:
+            return None, None
         command = list(self.value)
-        for name, tau in zip(names, effort):
+        for name, tau in commanded:
             command[list(joint_names).index(name)] = tau
         return self.take(command, policy, torque_limit, now)
+
+    def _refuse(self, kind: str, text: str, reason: str):
+        """Count a refused command and warn (rate-limited); (reason, no command)."""
+        self.refused += 1
+        self.warnings.warning(kind, f"{text} (refused so far: {self.refused})")
+        return reason, None
 
     def timed_out(self, now: float, timeout: float) -> bool:
         """True when the held command has just expired and dropped to zero."""

@@ -155,7 +155,7 @@ class ArmSimCore:
         period = self.config.wall_period
         last, self._last_tick_wall = self._last_tick_wall, wall_now
         if period > 0 and last is not None and wall_now - last > 1.5 * period:
-            self.late_ticks += 1
+            self.late_ticks += 0 if self.config.values["lockstep"] else 1   # commands tick it
 
     def _advance(self) -> None:
         sim = self.sim

@@ -44,17 +44,13 @@ class _RosFormatter(logging.Formatter):
 
 
 def run_dds(ros_argv: list, duration: float | None, status) -> int:
-    from .messages import DiscoveryError
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
     configure_logging(ros["level"])
     name, namespace, rules = node_identity(ros["remap"], NODE_NAME)
-    try:
-        node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name,
-                             namespace=namespace, remap=rules)
-    except DiscoveryError as error:
-        raise UsageError(str(error)) from None
+    node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name, namespace=namespace,
+                         remap=rules)   # a DiscoveryError is a UsageError: one line, exit 2
     try:
         node.spin(duration, status)
     finally:

@@ -5,8 +5,9 @@ into messages.
 The answers are the ones rclpy's ParameterService gives for the rclpy transport's node
 (rclpy/parameter_service.py and node.py, Jazzy): undeclared parameters are not allowed, so a
 get, describe or get-types naming an unknown parameter answers with an empty list; set
-applies each parameter on its own, set-atomically all or nothing; `scene` is read-only;
-every other parameter is dynamically typed (an integer is a fine double: the node core
+applies each parameter on its own, set-atomically all or nothing; `scene` and
+`robot_description` are read-only (READ_ONLY, as the rclpy transport declares them); every
+other parameter is dynamically typed (an integer is a fine double: the node core
 checks every value and refuses with a reason, changing nothing); an effect's key the scene
 does not name is declared NOT_SET, as rclpy declares a dynamically typed parameter without
 a value. A successful set publishes a parameter event listing the parameters set, with the
@@ -16,14 +17,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .parameters import PARAMETERS, SPECS, ParameterRefused
+from .parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused
 
 # rcl_interfaces/msg/ParameterType
 (NOT_SET, BOOL, INTEGER, DOUBLE, STRING, BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY,
  STRING_ARRAY) = range(10)
 KIND_TYPES = {"str": STRING, "float": DOUBLE, "bool": BOOL, "float_pair": DOUBLE_ARRAY,
               "str_list": STRING_ARRAY}
-READ_ONLY = ("scene",)           # chosen at start, as the rclpy transport declares it
 SEPARATOR = "."                  # rclpy's PARAMETER_SEPARATOR_STRING
 DEPTH_RECURSIVE = 0              # rcl_interfaces/srv/ListParameters.DEPTH_RECURSIVE
 

@@ -25,17 +25,32 @@ class ParameterRefused(ValueError):
         self.name, self.reason = name, reason
 
 
+# When a parameter may change (main.py's --help prints it): the one place it is decided.
+START = "start only"                   # refused while running (START_ONLY)
+KEPT = "live, state kept"              # the physics changes from the next step (LIVE)
+RESTART = "live, restarts the scene"   # a Scene field: the scene restarts with it
+ANYTIME = "live"
+
+
 @dataclass(frozen=True)
 class ParameterSpec:
     name: str
     kind: str              # "str", "float", "bool", "float_pair", "str_list"
     default: object        # a value, or a function scene -> value for scene-derived defaults
-    description: str
+    meaning: str
     scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
     effect: object = None       # an effect's key: the physics Parameter that checks it
+    when: str = ANYTIME         # START, KEPT, RESTART or ANYTIME
 
     def default_for(self, scene: Scene):
         return self.default(scene) if callable(self.default) else self.default
+
+    @property
+    def description(self) -> str:
+        """The meaning, and when it may change if not while running."""
+        if self.effect is not None:
+            return f"{self.meaning} ({'chosen at start' if self.when == START else 'changes live'})"
+        return self.meaning + ("; chosen at start" if self.when == START else "")
 
 
 def _from_scene(name):
@@ -48,14 +63,15 @@ def _node_policy(scene: Scene) -> str:
     return "command" if scene.policy == "zero" else scene.policy
 
 
-def _scene_spec(name, kind, description, default=None):
-    return ParameterSpec(name, kind, default or _from_scene(name), description, scene_field=True)
+def _scene_spec(name, kind, description, default=None, when=RESTART):
+    return ParameterSpec(name, kind, default or _from_scene(name), description, scene_field=True,
+                         when=when)
 
 
-# Effects whose keys change while the node runs: the physics is rebuilt from the next step
-# with the state and energy books carried over (none of them stores energy; a payload books
-# what changes hands in payload_exchange). The other effects' keys are start-only.
-LIVE_EFFECTS = ("effort_limits", "friction", "controller_model", "payload")
+# Effects whose keys are start-only, and why. The others' keys (effort_limits, friction,
+# controller_model, payload) change while the node runs: the physics is rebuilt from the next
+# step with the state and energy books carried over (none of them stores energy; a payload
+# books what changes hands in payload_exchange).
 START_ONLY_WHY = {
     "motors": "the rotor inertia is in the mass matrix and the winding currents in the state",
     "springs": "a spring's stored energy would change with nothing to book it",
@@ -77,12 +93,11 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
     default = parameter.default
     unset = (f"; not set: no {effect}" if default is REQUIRED else "" if default is None
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
-    when = "changes live" if effect in LIVE_EFFECTS else "chosen at start"
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
         "float_pair" if parameter.kind == "pair" else "float", _effect_value(effect, key),
-        f"{parameter.description}, {parameter.unit}{unset} ({when})",
-        scene_field=True, effect=parameter)
+        f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
+        when=START if effect in START_ONLY_WHY else KEPT)
 
 
 # One parameter per scene key of every effect, named and checked as the scene file names and
@@ -94,15 +109,16 @@ EFFECT_PARAMETERS = (_effect_spec("effort_limits", None, EffortLimits.parameter)
 
 # Every parameter of the node, in one place. Scene-derived defaults come from `scene`.
 PARAMETERS = (
-    ParameterSpec("scene", "str", "release", "preset scene (config/scenes); chosen at start"),
+    ParameterSpec("scene", "str", "release", "preset scene (config/scenes)", when=START),
     ParameterSpec("robot_description", "str", "", "URDF of a planar 2R arm: its link lengths, "
                   "masses, inertias, limits, damping, friction and joint names replace the "
-                  "scene's (\"\" = the scene's arm); chosen at start"),
+                  "scene's (\"\" = the scene's arm)", when=START),
     _scene_spec("policy", "str", "torque policy: command, command_gravity_compensation, zero, "
                 "constant, gravity_compensation, frozen_gravity", _node_policy),
     _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
     _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
-    _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)"),
+    _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)",
+                when=KEPT),
     *EFFECT_PARAMETERS,
     _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
     _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
@@ -130,10 +146,10 @@ PARAMETERS = (
     ParameterSpec("rerun_spawn", "bool", False, "spawn a Rerun viewer"),
     ParameterSpec("rerun_connect", "str", "", "stream to a Rerun viewer at this address (\"\" = off)"),
     ParameterSpec("joint_states_topic", "str", JOINT_STATES_TOPIC, "topic of the published "
-                  "sensor_msgs/JointState; chosen at start"),
+                  "sensor_msgs/JointState", when=START),
     ParameterSpec("joint_commands_topic", "str", JOINT_COMMANDS_TOPIC, "topic of "
                   "sensor_msgs/JointState effort commands (ros2_control's topic-based "
-                  "hardware interface); chosen at start"),
+                  "hardware interface)", when=START),
     ParameterSpec("publish_clock", "bool", True, "publish rosgraph_msgs/Clock on /clock every "
                   "tick: simulated time, equal to the JointState stamps"),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
@@ -142,11 +158,11 @@ PARAMETERS = (
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
 # Physics that changes while it runs without a restart: the state and the books carry over.
-LIVE = ("damping",) + tuple(s.name for s in EFFECT_PARAMETERS
-                            if s.name.partition(".")[0] in LIVE_EFFECTS)
-START_ONLY = ("scene", "robot_description", "joint_states_topic",   # fixed once running
-              "joint_commands_topic") + tuple(
-    s.name for s in EFFECT_PARAMETERS if s.name.partition(".")[0] not in LIVE_EFFECTS)
+LIVE = tuple(s.name for s in PARAMETERS if s.when == KEPT)
+# Fixed once running; refused in this order (the node's own before the effects' keys).
+START_ONLY = tuple(s.name for s in sorted(PARAMETERS, key=lambda s: s.effect is not None)
+                   if s.when == START)
+READ_ONLY = ("scene", "robot_description")   # declared read-only (both transports)
 EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFECT_PARAMETERS
                                if s.name.startswith(effect + "."))
                  for effect in MAPPING_EFFECTS}     # mapping effect -> (parameter, key) pairs
@@ -154,11 +170,7 @@ EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFEC
 
 def when_changed(name: str) -> str:
     """What setting `name` while the node runs does."""
-    if name in START_ONLY:
-        return "start only"
-    if name in LIVE:
-        return "live, state kept"
-    return "live, restarts the scene" if name in SCENE_PARAMETERS else "live"
+    return SPECS[name].when
 
 
 SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
@@ -236,9 +248,8 @@ def resolve_parameters(overrides: dict) -> NodeConfig:
     """Defaults from the scene named by `scene` (read through `robot_description` when one is
     given), then `overrides`; every value validated."""
     _check_known(overrides)
-    values = scene_defaults(*(coerce(SPECS[name], overrides.get(name, SPECS[name].default))
-                              for name in ("scene", "robot_description")))
-    scene = _base_scene(values["scene"], values["robot_description"])
+    values, scene = _defaults(*(coerce(SPECS[name], overrides.get(name, SPECS[name].default))
+                                for name in READ_ONLY))
     return _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
 
 
@@ -250,19 +261,21 @@ def _check_known(names) -> None:
 
 def scene_defaults(scene_name: str, robot_description: str = "") -> dict:
     """Every parameter's default for a scene and URDF (what a transport declares)."""
-    scene = _base_scene(scene_name, robot_description)
-    names = {"joint_names": list(urdf.read_urdf(robot_description).joint_names)
-             } if robot_description else {}
+    return _defaults(scene_name, robot_description)[0]
+
+
+def _defaults(scene_name: str, robot_description: str) -> tuple[dict, Scene]:
+    """(every parameter's default, the scene read through the URDF), the URDF read once."""
+    scene, names = _load(scene_name), {}
+    if robot_description:
+        try:
+            robot = urdf.read_urdf(robot_description)
+            scene = robot.scene(scene)
+        except SceneError as error:
+            raise ParameterRefused("robot_description", str(error)) from None
+        names = {"joint_names": list(robot.joint_names)}
     return ({spec.name: spec.default_for(scene) for spec in PARAMETERS} | names
-            | {"scene": scene_name, "robot_description": robot_description})
-
-
-def _base_scene(scene_name: str, robot_description: str) -> Scene:
-    scene = _load(scene_name)
-    try:
-        return urdf.scene_from_urdf(robot_description, scene) if robot_description else scene
-    except SceneError as error:
-        raise ParameterRefused("robot_description", str(error)) from None
+            | {"scene": scene_name, "robot_description": robot_description}), scene
 
 
 def _load(name: str) -> Scene:

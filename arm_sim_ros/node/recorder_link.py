@@ -2,18 +2,20 @@
 in order after them, and a recorder that fails dropped with one error line (telemetry must
 never stop the simulation).
 
-Every `books_every`-th step (the recorder's) goes with its error books (the simulator's
-error_estimate, accumulated_error and substeps_taken after it), so the recording shows how
-far the steps may be off and what they cost. The node's story goes with the steps, one row
-per tick (recorders with `node_ticks`): the commands refused during the tick, whether it
-came late, the real-time factor and its sub-steps (those of its steps): a tuple per tick
-here, the numbers worked out in the recorder's sender thread (recording/story.py). The
-recorder learns the stamp origin (`for_node`) so that its ros_time timeline is the
-JointState stamps.
+Every `books_every`-th step (the recorder's) goes with its error books (readouts.error_books:
+the simulator's error_estimate, accumulated_error and substeps_taken after it), so the
+recording shows how far the steps may be off and what they cost. The node's story goes
+with the steps, one row per tick (recorders with `node_ticks`): the commands refused during
+the tick, whether it came late, the real-time factor and its sub-steps (those of its
+steps): a tuple per tick here, the numbers worked out in the recorder's sender thread
+(recording/story.py). The recorder learns the stamp origin (`for_node`) so that its
+ros_time timeline is the JointState stamps.
 """
 from __future__ import annotations
 
 import time
+
+from ..recording.readouts import error_books
 
 # Steps collected before the recorder gets them in one call: 0.1 s behind at the default one
 # step a tick; collecting 50 measured slower than 10 (the kept states fall out of cache).
@@ -96,8 +98,7 @@ class RecorderLink:
                 advance()
                 keep(sim.state)
                 if every and sim.steps % every == 0:
-                    book((sim.steps, sim.error_estimate, sim.accumulated_error,
-                          sim.substeps_taken))
+                    book(error_books(sim))
             if len(self._unrecorded) >= RECORD_EVERY:
                 self.hand_over()
         else:

@@ -206,8 +206,7 @@ def node_identity(remap: dict, node_name: str = NODE_NAME) -> tuple[str, str, di
         node, colon, rule = source.rpartition(":")
         if not colon or node == node_name:
             rules.setdefault(rule, target)
-    name = rules.pop("__node", rules.pop("__name", node_name))
-    rules.pop("__name", None)
+    name = rules.pop("__node", rules.pop("__name", node_name))   # both popped; __node wins
     namespace = "/" + rules.pop("__ns", "/").strip("/")
     if not NODE_NAME_RULE.fullmatch(name):
         raise UsageError(f"-r __node:={name!r}: a node name is letters, digits and underscores, "

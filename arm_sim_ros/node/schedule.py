@@ -17,6 +17,22 @@ class TickSchedule:
         """Wall seconds until the next tick is due (≤ 0: due now)."""
         return self.next_tick - now
 
+    def run_due(self, core, tick) -> int:
+        """A tick timer's callback (the rclpy transport's): `tick()` for every tick due, on
+        the core's wall clock and current wall period, so a late callback still keeps
+        real_time_factor; at most CATCH_UP s of ticks, so commands and services are served
+        between. In lockstep the commands tick: it returns at once. Returns the ticks run."""
+        if core.config.values["lockstep"]:
+            return 0
+        now = started = core.wall_clock()
+        ran = 0
+        while self.wait(now) <= 0 and now - started <= CATCH_UP:
+            tick()
+            self.ticked(now, core.config.wall_period)
+            ran += 1
+            now = core.wall_clock()
+        return ran
+
     def ticked(self, now: float, period: float) -> None:
         """A tick ran at `now`; the next is one `period` (the current wall period) later."""
         self.next_tick += period

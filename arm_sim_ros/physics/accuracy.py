@@ -9,7 +9,8 @@ first sub-step: a stiff mode the stability plan's sub-steps damp out within the 
 (damping 500 at h = 50 ms: 377 sub-steps, true error 3e-9) made the first-sub-step
 estimate 1e9 times too large and split such steps 4-10x more for no gain. The estimate is
 carried to the steps until the next check; the books are closed lazily at each check
-(carried steps at the mean of the checks either side), so an unchecked step is the
+(carried steps at the mean of the checks either side; until then at half the latest, the
+least that mean can be, so the sum never goes down), so an unchecked step is the
 compiled step called by the simulator directly, nothing else.
 
 Schedule: every CHECK_EVERY-th step; every RELAXED_EVERY-th while the estimate is under
@@ -19,9 +20,11 @@ Sparser checks cost honesty: at 64 steps the sums fell to 0.11-0.24x of the true
 
 Switching scenes (events.py): the same doubling, sub-step by sub-step: each smooth piece
 up to a located switch is doubled and the pieces' errors summed. Steps without a switch
-follow the schedule; a step with a located switch or an engaged compliant limit is always
-estimated (they are short and where the error is made). A count the tolerance raises
-there applies from the next step (the step's switches are already booked).
+follow the schedule; a step that starts with a compliant limit engaged is always
+estimated, and so is a step with a located switch when steps are not split (the switch is
+seen in the plain step's fast path, events.py; split steps are estimated on the schedule):
+they are short and where the error is made. A count the tolerance raises there applies
+from the next step (the step's switches are already booked).
 
 `error_estimate` is the latest check's local error (max over q, qd of |e|, rad and rad/s);
 `accumulated_error` sums them over the steps: a bound on the global error while errors do
@@ -52,9 +55,9 @@ from math import ceil, isfinite
 from . import stability
 
 CHECK_EVERY = 16          # steps between doubling checks (a check: 2 steps' evaluations)
-RELAXED_EVERY = 32        # ... while the estimate is under RELAXED x the tolerance
+RELAXED_EVERY = 32        # ... while the estimate is under RELAXED x the tolerance (and
+                          # the tolerance does not split steps: a check is 2n sub-steps)
 RELAXED = 1.0 / 16.0      # (a step twice as long would still meet it: 2^p = 16 for RK4)
-SPLIT_CHECK_EVERY = 16    # ... while the tolerance splits steps (a check: 2n sub-steps)
 SAFETY = 0.5              # new counts aim at half the tolerance: fewer retaken steps
 MAX_SUBSTEPS = 10_000     # the most a tolerance may ask of one step
 # Per simulated second, scaled error (see above); 0 = off (estimate only).
@@ -81,7 +84,6 @@ class Accuracy:
 
     def reset(self) -> None:
         self.error_estimate = 0.0     # the latest check's local error estimate
-        self.scaled = 0.0             # its scaled error (max |e_i| / (1 + |y_i|))
         self.since = self.due = 0     # step index of the latest check; of the next
         self.booked = 0.0             # Σ error_estimate over the steps before `since`
         self.booked_taken = 0         # sub-steps run in split steps before `since`
@@ -98,14 +100,27 @@ class Accuracy:
             else:
                 self.plain = stability.substepping(self.step, n)
 
-    def accumulated(self, steps: int) -> float:
-        """Σ error_estimate over `steps` steps since reset (each carries the latest check's)."""
-        return self.booked + self.error_estimate * (steps - self.since)
+    def carry(self, previous, steps: int) -> None:
+        """Go on from the books `previous` after `steps` steps: their sums (closed: no later
+        check of theirs re-counts their latest steps), a check at once."""
+        self.booked = previous.accumulated(steps, closing=True)
+        self.booked_taken = previous.taken(steps) or 0
+        self.since = self.due = steps
+
+    def accumulated(self, steps: int, closing: bool = False) -> float:
+        """Σ error_estimate over `steps` steps since reset. Steps since the latest check count
+        at half its estimate until the next check books them at the mean of the two (never
+        less: estimates are >= 0), so the sum never goes down; `closing` (no next check:
+        the dynamics are rebuilt) at its estimate."""
+        share = 1.0 if closing else 0.5
+        return self.booked + share * self.error_estimate * (steps - self.since)
 
     def taken(self, steps: int) -> int:
-        """Sub-steps run in split steps over `steps` steps since reset (0: plain steps)."""
+        """Sub-steps run in split steps over `steps` steps since reset (0: plain steps),
+        those the switching stepper adds (contacts, re-splits after a switch) included."""
         return self.booked_taken + (self.substeps * (steps - self.since)
-                                    if self.substeps > 1 else 0)
+                                    if self.substeps > 1 else 0) + (
+            self.stepper.extra_substeps if self.stepper is not None else 0)
 
     def doubled(self, f, y, h, full, n=1) -> tuple[float, float]:
         """(local error, scaled error) of y -> full, n equal sub-steps over h, by taking it
@@ -174,16 +189,12 @@ class Accuracy:
         self.booked += 0.5 * (self.error_estimate + error) * carried + error
         self.booked_taken += (self.substeps * carried if self.substeps > 1 else 0) + (
             n if n > 1 else 0)
-        self.since, self.error_estimate, self.scaled = index + 1, error, scaled
+        self.since, self.error_estimate = index + 1, error
         wanted = n if wanted is None else wanted
         self.use(wanted)
-        if wanted > self.base:
-            every = SPLIT_CHECK_EVERY
-        elif self.tolerance and scaled < RELAXED * self.tolerance * h:
-            every = RELAXED_EVERY
-        else:
-            every = CHECK_EVERY
-        self.due = index + every
+        relax = (wanted <= self.base and self.tolerance      # never while the tolerance splits
+                 and scaled < RELAXED * self.tolerance * h)
+        self.due = index + (RELAXED_EVERY if relax else CHECK_EVERY)
         if wanted > self.most and self.emit is not None:
             self.most = wanted
             self.emit("substepping", f"local error {first / h:.3g} per s (scaled) "
@@ -197,22 +208,26 @@ class Embedded:
 
     due = 0                     # every step is its own check
 
-    def __init__(self, step, advance):
-        self.step, self.advance_by, self.substeps = step, advance, 1
+    def __init__(self, step):
+        self.step, self.substeps = step, 1
         self.plain = self.check = self.advance
         self.reset()
 
     def reset(self) -> None:
         self.error_estimate = self.accumulated_error = 0.0
 
-    def accumulated(self, steps: int) -> float:
+    def carry(self, previous, steps: int) -> None:
+        """Go on from the books `previous` after `steps` steps: their sum."""
+        self.accumulated_error = previous.accumulated(steps, closing=True)
+
+    def accumulated(self, steps: int, closing: bool = False) -> float:
         return self.accumulated_error
 
     def taken(self, steps: int) -> int:
         return 0
 
     def advance(self, f, y, h):
-        y1 = self.advance_by(f, y, h)
+        y1 = self.step(f, y, h)
         self.error_estimate = self.step.last_error
         self.accumulated_error += self.error_estimate
         return y1
@@ -220,42 +235,42 @@ class Embedded:
 
 class Unchecked:
     """No estimate (NaN): steps the stability plan refuses, and dopri5 on a scene that switches
-    modes. `taken` None: the simulator counts sub-steps itself."""
+    modes (`stepper`)."""
 
     error_estimate = float("nan")
     due = 0
 
-    def __init__(self, advance):
+    def __init__(self, advance, substeps: int, stepper=None):
         self.check = self.plain = advance
+        self.substeps, self.stepper = substeps, stepper
 
     def reset(self) -> None:
         pass
 
-    def accumulated(self, steps: int) -> float:
+    def accumulated(self, steps: int, closing: bool = False) -> float:
         return self.error_estimate
 
-    def taken(self, steps: int) -> None:
-        return None
+    def taken(self, steps: int) -> int:
+        return (steps * self.substeps if self.substeps > 1 else 0) + (
+            self.stepper.extra_substeps if self.stepper is not None else 0)
 
 
-def plan(tableau, step, advance, substeps: int, tolerance: float, width: int, emit=None,
+def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
          clock=None, stepper=None, previous=None):
-    """The error books: the embedded pair's own estimate, or checked equal sub-steps (over
-    the stability plan's) of a fixed-step method, switched at events by `stepper` if any.
+    """The error books, with the step they take (`step` as the stability plan's `substeps`
+    equal sub-steps): the embedded pair's own estimate, or checked equal sub-steps (over the
+    stability plan's) of a fixed-step method, switched at events by `stepper` if any.
     `previous`: the books so far (a payload grasped rebuilds the dynamics mid-run)."""
     if getattr(tableau, "adaptive", False) and stepper is not None:
         # dopri5 between located switches: its pieces' own estimates are not summed (NaN);
         # without the switches its error control would chase the kink forever.
-        return Unchecked(stepper.advance)
+        return Unchecked(stepper.advance, substeps, stepper)
     if getattr(tableau, "adaptive", False):
-        books = Embedded(step, advance)
+        books = Embedded(step)        # (an adaptive method plans no sub-steps)
     elif substeps > stability.MAX_SUBSTEPS:   # the stability plan refuses: keep its refusal
-        return Unchecked(advance)
+        return Unchecked(stability.substepping(step, substeps), substeps)
     else:
         books = Accuracy(step, tableau.order, tolerance, width, substeps, emit, clock, stepper)
     if previous is not None:        # go on from here: the sums so far, a check at once
-        steps = clock()
-        books.accumulated_error = books.booked = previous.accumulated(steps)
-        books.booked_taken = previous.taken(steps) or 0
-        books.since = books.due = steps
+        books.carry(previous, clock())
     return books

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from . import stability
 from .dynamics import build_dynamics
 from .effects import Damping, Gravity
 from .integrators import INTEGRATORS, compile_step
@@ -157,8 +158,7 @@ class Batch:
         worst = 0.0
         for c in (1.0, -1.0):                       # full extension and full fold
             m11, m12 = a + 2.0 * b * c, d + b * c
-            inverse = ((0.5 * (m11 + m22) + np.hypot(0.5 * (m11 - m22), m12))
-                       / (m11 * m22 - m12 * m12))
+            inverse = stability.inverse_mass_eigenvalue(m11, m12, m22, np.hypot)
             worst = np.maximum(worst, np.broadcast_to(inverse, (self.count,)))
         i = int(np.argmax(worst))
         stiffest = scene.replace(**{name: tuple(v[name][i]) for name in LINK_PARAMETERS})

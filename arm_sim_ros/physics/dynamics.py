@@ -92,11 +92,11 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
         namespace.update(effect.constants(arm))
     extra = [name for effect in effects for name in effect.state]
     signature = ", ".join(["q1", "q2", "u1", "u2"] + extra)
-    terms = ["    " + line for effect in effects for line in effect.terms()]
+    terms = stage_terms(effects)
     lines = [f"def rhs({signature}):"] + body(effects)
     channels = merged_channels(effects)
-    rates = [r for effect in effects for r in effect.rates()]
-    lines += SOLVE + ["    return " + ", ".join(["a1", "a2"] + rates + [c.rate for c in channels])]
+    lines += SOLVE + ["    return " + ", ".join(["a1", "a2"] + rates(effects)
+                                                 + [c.rate for c in channels])]
     drives = any(effect.drives for effect in effects)
     torque = ([f"def torque({signature}):"] + terms + ["    return t1, t2"] if drives else
               [f"def torque({signature}):", "    return 0.0, 0.0"])
@@ -125,6 +125,11 @@ def stage_terms(effects, mode=None) -> list[str]:
             for line in (effect.mode_terms(mode) if mode is not None else effect.terms())]
 
 
+def rates(effects) -> list[str]:
+    """The effects' rate expressions of their extra states, in state order."""
+    return [r for effect in effects for r in effect.rates()]
+
+
 def merged_channels(effects) -> list[Channel]:
     """The effects' channels; two of one name (damping's and a compliant limit's
     `dissipated`) become one whose rate is the sum."""
@@ -145,10 +150,9 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     fixed = tuple(code in FIXED for code in mode[:2])
     signature = ", ".join(["q1", "q2", "u1", "u2"] + list(dynamics.extra))
     lines = body(dynamics.active, mode) + CONSTRAINED_SOLVE[fixed]
-    rates = [r for effect in dynamics.active for r in effect.rates()]
     channels = [c.rate for c in merged_channels(dynamics.active)]
-    source = "\n".join([f"def rhs({signature}):"] + lines
-                       + ["    return " + ", ".join(["a1", "a2"] + rates + channels)]
+    returned = ["a1", "a2"] + rates(dynamics.active) + channels
+    source = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)]
                        + [f"def probe({signature}):"] + lines
                        + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
     terms = stage_terms(dynamics.active, mode)

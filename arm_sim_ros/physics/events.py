@@ -25,7 +25,7 @@ from math import ceil
 from . import model, stability
 from .clamps import KINDS as CLAMPS
 from .clamps import Clamps
-from .dynamics import FIXED, mode_functions
+from .dynamics import mode_functions
 from .effects import Effect
 
 TIME_TOLERANCE = 1e-12    # s: an event's time is known to this (the bracket's width)
@@ -50,15 +50,13 @@ class Engaged(Effect):
         return self.omega
 
 
-def switching(dynamics, tableau, step, advance, substeps: int, emit, clock, counts=None):
-    """(the switching stepper, its advance) for a scene with non-smooth effects; (None,
-    `advance`, the plain planned step) without any: then nothing here runs. `emit(kind,
-    message)` reports, `clock()` is the step's start time, `counts` carries the counts on
-    (a payload grasped rebuilds the dynamics)."""
+def switching(dynamics, tableau, step, substeps: int, emit, clock, counts=None):
+    """The switching stepper for a scene with non-smooth effects; None without any: then
+    nothing here runs. `emit(kind, message)` reports, `clock()` is the step's start time,
+    `counts` carries the counts on (a payload grasped rebuilds the dynamics)."""
     if not any(e.switching for e in dynamics.active):
-        return None, advance
-    stepper = Switching(dynamics, tableau, step, substeps, emit, clock, counts)
-    return stepper, stepper.advance
+        return None
+    return Switching(dynamics, tableau, step, substeps, emit, clock, counts)
 
 
 class Switching:
@@ -69,8 +67,8 @@ class Switching:
         self.friction, self.limits = effects.get("friction"), effects.get("joint_limits")
         self.hard = self.limits is not None and self.limits.hard
         self.width = 4 + len(dynamics.extra)
-        names = ("q1", "q2", "u1", "u2") + dynamics.extra + dynamics.channels
-        self.impact_at = names.index("impact_loss") if "impact_loss" in names else None
+        self.impact_at = (self.width + dynamics.channels.index("impact_loss")
+                          if "impact_loss" in dynamics.channels else None)
         self.substeps, self.engaged_rate = substeps, 0.0
         if self.limits is not None and not self.hard:
             # h |λ| of the engaged arm per unit step (the step size is the plan's business)
@@ -80,13 +78,14 @@ class Switching:
         self.clamps = Clamps.of(dynamics)  # effort, voltage clamps of a state-dependent request
         self.locate = True                # False: switch at sub-step ends (first order)
         self.checked = None               # advance, estimated (accuracy.py), or None
+        self.extra_substeps = 0           # sub-steps taken beyond the planned count since reset
         self._functions, self.mode, self._last = {}, None, None
 
     def reset(self) -> Counter:
         """Forget the mode (found again from the next state) and the counts, which are
         returned: Simulator.switch_events."""
         self.counts.clear()
-        self.mode, self._last = None, None
+        self.mode, self._last, self.extra_substeps = None, None, 0
         return self.counts
 
     # --- modes ---------------------------------------------------------------------------
@@ -140,17 +139,17 @@ class Switching:
         elif self.clamps is not None and self.clamps.stale():   # a new command
             self.mode = self.settle(y, self.clamped(y, self.mode))
         rhs, _, guard, kinds, _ = self.functions(self.mode)
-        if self.substeps == 1 and not (self.mode[2] or self.mode[3]):   # the common case
+        engaged = self.mode[2] or self.mode[3]        # a compliant limit (its zones)
+        if self.substeps == 1 and not engaged:        # the common case
             y1 = self.step(rhs, y, h)
             if not kinds or min(guard(*y1[:self.width])) >= 0.0:
                 if piece is not None:
                     piece(rhs, y, h, y1)
                 self._last = y1
                 return y1
-        engaged = bool(self.mode[2] or self.mode[3])
         if piece is None and self.checked is not None and (self.substeps == 1 or engaged):
             return self.checked(f, y, h)     # a switch inside or a contact: estimate it
-        remaining, events = h, 0
+        remaining, events, taken = h, 0, 0
         while remaining > 1e-15 * h:
             mode = self.mode
             rhs, _, guard, kinds, _ = self.functions(mode)
@@ -174,9 +173,13 @@ class Switching:
                                           elapsed + dt)
                 events += 1
                 remaining -= k * dt + t
+                taken += k + (t > 0.0)            # the sub-steps before, the one cut short
                 break
             else:
                 remaining = 0.0
+                taken += count
+        if taken > self.substeps:                 # engaged, or re-split after a switch
+            self.extra_substeps += taken - (self.substeps if self.substeps > 1 else 0)
         self._last = y = tuple(y)
         return y
 

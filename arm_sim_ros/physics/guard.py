@@ -14,7 +14,7 @@ def divergence(sim, state) -> str | None:
     """Why `state` has diverged, or None if it is sound."""
     inputs, losses = sim.books(state)
     scale = 1.0 + abs(sim.initial_energy) + abs(inputs) + abs(losses)
-    residual = sim.energy(state) - sim.initial_energy - inputs + losses
+    residual = sim.residual(state)
     if not abs(residual) <= scale:                   # NaN too
         return (f"diverged: the energy balance is off by {residual:.3g} J, more than the "
                 f"{scale:.3g} J in play (the step is too large for this motion: reduce "

@@ -97,15 +97,17 @@ class Simulator:
         kinds = self.dynamics.channel_kinds
         self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
         self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
-        self._plan_substeps(self._tableau)
+        self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
+            self._tableau, self.dynamics.active, self.arm, self.step_size)
+        if message:
+            self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
-        self.switching, _ = switching_for(   # friction, limits, clamps: events.py
-            self.dynamics, self._tableau, self._step, self._advance, self.substeps, self._emit,
+        self.switching = switching_for(      # friction, limits, clamps: events.py
+            self.dynamics, self._tableau, self._step, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
-        self.accuracy = accuracy.plan(self._tableau, self._step, self._advance, self.substeps,
-                                      scene.tolerance, 4, self._emit, lambda: self.steps,
-                                      self.switching, getattr(self, "accuracy", None))
-        self._advance = self.accuracy.check      # a step that checks its error (accuracy.py)
+        self.accuracy = accuracy.plan(   # the planned step, its error checked (accuracy.py)
+            self._tableau, self._step, self.substeps, scene.tolerance, 4, self._emit,
+            lambda: self.steps, self.switching, getattr(self, "accuracy", None))
 
     def reset(self) -> None:
         s = self.scene
@@ -153,20 +155,11 @@ class Simulator:
         self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
         self.retired = tuple(r + w - n for r, w, n in zip(self.retired, was, self.books(self.state)))
 
-    def _plan_substeps(self, tableau) -> None:
-        (self.stability_ratio, self.stability_limit, self.substeps, self._advance,
-         message) = stability.plan(tableau, self.dynamics.active, self.arm, self.step_size,
-                                   self._step)
-        if message:
-            self._emit("substepping", message)
-
     @property
     def substeps_taken(self) -> int:
-        """Sub-steps run since reset in split steps (0 while plain steps do)."""
-        taken = self.accuracy.taken(self.steps)     # stability and tolerance (accuracy.py)
-        if taken is not None:
-            return taken
-        return self.steps * self.substeps if self.substeps > 1 else 0
+        """Sub-steps run since reset in split steps (0 while plain steps do): the stability
+        plan's, the tolerance's and the switching stepper's (accuracy.py, events.py)."""
+        return self.accuracy.taken(self.steps)
 
     @property
     def error_estimate(self) -> float:
@@ -190,7 +183,7 @@ class Simulator:
             return
         books = self.accuracy       # plain planned steps until a check is due: no wrapper
         try:
-            y = (books.plain if self.steps < books.due else self._advance)(
+            y = (books.plain if self.steps < books.due else books.check)(
                 self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
             self._refuse(f"cannot be taken: {error}")
@@ -249,9 +242,11 @@ class Simulator:
         return (sum((state[i] for i in self._inputs), self.retired[0]),
                 sum((state[i] for i in self._losses), self.retired[1]))
 
-    def residual(self) -> float:
-        work, dissipated = self.books(self.state)
-        return self.energy(self.state) - self.initial_energy - work + dissipated
+    def residual(self, state=None) -> float:
+        """E - E(0) - inputs + losses of `state` (now): zero for an exact integration."""
+        state = self.state if state is None else state
+        work, dissipated = self.books(state)
+        return self.energy(state) - self.initial_energy - work + dissipated
 
     def joint_torque(self, state=None) -> tuple[float, float]:
         """The torque the joints receive at `state` (now): after limits and windings."""

@@ -96,8 +96,9 @@ def half_disk_limit(tableau: ButcherTableau) -> float:
 RK4_REAL_LIMIT = real_stability_limit(RK4)
 
 
-def inverse_mass_eigenvalue(m11: float, m12: float, m22: float) -> float:
-    """Largest eigenvalue of M^-1 = 1 / smallest eigenvalue of M, written without cancellation."""
+def inverse_mass_eigenvalue(m11, m12, m22, hypot=hypot):
+    """Largest eigenvalue of M^-1 = 1 / smallest eigenvalue of M, written without
+    cancellation; of numpy arrays too, element by element, with hypot=numpy.hypot."""
     half_trace = 0.5 * (m11 + m22)
     spread = hypot(0.5 * (m11 - m22), m12)
     return (half_trace + spread) / (m11 * m22 - m12 * m12)
@@ -160,8 +161,8 @@ def substepping(step, substeps: int):
     return advance
 
 
-def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, step):
-    """(ratio, limit, sub-steps, the step to take, what to tell a person or None): the
+def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
+    """(ratio, limit, sub-steps, what to tell a person or None): the
     sub-steps that keep the stiff effects stable at every elbow angle (1 = plain steps).
     Damping alone has real eigenvalues (the real-axis limit); springs and windings
     oscillate, so their bound |lambda| is kept inside the half-disk. An adaptive method
@@ -173,4 +174,4 @@ def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, step):
         stiff = "+".join(e.name for e in effects if e.stiffness(arm) or e.frequency(arm))
         message = (f"{what} = {ratio:.4g} ({stiff}) exceeds {tableau.name}'s stability limit "
                    f"{limit:.4g}: each {h:g} s step is taken as {substeps} sub-steps")
-    return ratio, limit, substeps, substepping(step, substeps), message
+    return ratio, limit, substeps, message

@@ -116,7 +116,7 @@ def read_urdf(text: str) -> UrdfArm:
                          f"{degrees(np.arccos(min(1.0, cosine))):.3g}° apart: not parallel, so "
                          "the arm would leave its plane")
     out = float(e @ a1)
-    in_plane = e - out * a1 if out else e
+    in_plane = e - out * a1
     l1 = float(np.linalg.norm(in_plane))
     if not l1 > 0:
         raise SceneError(f"URDF: {_name(elbow)} sits on the axis of {_name(shoulder)}: "
@@ -250,6 +250,7 @@ class _Tree:
         if len(roots) != 1:
             raise SceneError(f"URDF: {len(roots)} root links ({', '.join(roots) or 'a loop'}); "
                              "a robot is one tree")
+        self.root = roots[0]
         for link in self.links:
             self.chain(link)                          # refuses a loop
 
@@ -305,7 +306,7 @@ class _Tree:
         return rotation, translation
 
     def world(self, link):
-        return self.relative(next(n for n in self.links if n not in self.parent_joint), link)
+        return self.relative(self.root, link)
 
     def tip_length(self, link2, direction):
         """How far the farthest frame fixed to link 2 on its line is from the elbow."""
@@ -386,4 +387,4 @@ def _axis(joint) -> np.ndarray:
     norm = sqrt(float(axis @ axis))
     if not norm > 0:
         raise SceneError(f"URDF: joint {_name(joint)} has a zero <axis>")
-    return axis if norm == 1.0 else axis / norm
+    return axis / norm

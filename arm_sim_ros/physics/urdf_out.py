@@ -7,6 +7,7 @@ effort_limits, damping and Coulomb friction; the rest stays in the scene.
 """
 from __future__ import annotations
 
+from ..interface import JOINT_NAMES
 from .scene import MAX_INITIAL_ANGLE, Scene
 from .urdf import NO_EFFORT_LIMIT
 
@@ -15,7 +16,6 @@ HOUSING_RADIUS = 0.06      # m: the shoulder's cylinder
 # <limit> needs a velocity (urdfdom refuses one without); the physics sets no speed limit,
 # so it writes a bound far above what a simulated scene reaches, which nothing enforces.
 VELOCITY_LIMIT = 1000.0    # rad/s
-JOINTS = ("shoulder_joint", "elbow_joint")
 COLORS = (("link1_blue", "0.25 0.55 0.95 1"), ("link2_orange", "0.95 0.55 0.2 1"))
 
 HEADER = """<?xml version="1.0"?>
@@ -76,7 +76,7 @@ def scene_to_urdf(scene: Scene, robot: str = "two_link_arm") -> str:
     parents = ("arm_plane", "link1")
     offsets = (0.0, links.link_lengths[0])
     for i in (0, 1):
-        parts.append(_joint(JOINTS[i], parents[i], f"link{i + 1}", offsets[i], ranges[i],
+        parts.append(_joint(JOINT_NAMES[i], parents[i], f"link{i + 1}", offsets[i], ranges[i],
                             _effort(scene, i), pair[i],
                             friction[i]))
         parts.append(_link(f"link{i + 1}", links.link_lengths[i], links.link_masses[i],

@@ -5,44 +5,38 @@ mass, the joint torques as arrows along the joint axes and the gravity vector.
 The URDF's root is the world, z up as in RViz (physics/urdf.py says how its frames map onto
 the physics' plane): the view is z up, the arm's plane vertical, gravity pointing down. The
 URDF holds the default arm (1 m rods, COMs at 0.5 m): a scene whose links differ gets no 3D
-view rather than a wrong one. The joints and arrows are sent at the 2D drawing's frames
-(writer.FRAME_PERIOD), from the sender thread.
+view rather than a wrong one. A payload is no link: the scene's bare links are compared (the
+COMs drawn are those the physics moves, payload folded in). The joints and arrows are sent
+at the 2D drawing's frames (writer.FRAME_PERIOD), from the sender thread.
 """
 from __future__ import annotations
 
-import os
-import sys
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 
+from ..interface import JOINT_NAMES as JOINTS
+from ..physics.scene import scene_dirs
 from ..physics.urdf import read_urdf
+from .blueprint import JOINT_COLORS
 from .columns import joint_transforms, vectors3d
 
 ROOT = "arm3d"
 URDF_NAME = "two_link_arm.urdf"
-JOINTS = ("shoulder_joint", "elbow_joint")
 LINKS = ("link1", "link2")               # the frame each joint turns, in URDF order
 PLANE = "arm_plane"                      # the URDF's frame of the physics' plane (y up)
 TORQUE_SCALE = 0.05                      # m of arrow per N m of joint torque
 GRAVITY_SCALE = 0.05                     # m of arrow per m/s² of gravity
 TORQUE_PATHS = tuple(f"{ROOT}/torque/{joint}" for joint in JOINTS)
-COLORS = ((80, 220, 235), (255, 205, 70))   # as the 2D joints: shoulder cyan, elbow amber
 
 
 def urdf_path() -> Path | None:
-    """The shipped URDF: $ARM_SIM_URDF, the source tree, or where pip or colcon install it."""
-    candidates = [Path(os.environ["ARM_SIM_URDF"])] if os.environ.get("ARM_SIM_URDF") else []
-    candidates += [Path(__file__).resolve().parents[2] / "urdf" / URDF_NAME,
-                   Path(sys.prefix) / "share" / "arm_sim_ros" / "urdf" / URDF_NAME]
-    try:  # a colcon install puts it in the package's share directory
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(Path(get_package_share_directory("arm_sim_ros")) / "urdf" / URDF_NAME)
-    except Exception:
-        pass
-    return next((p for p in candidates if p.is_file()), None)
+    """The shipped URDF, urdf/ beside config/scenes wherever the presets are found
+    (physics.scene.scene_dirs: the source tree, or where pip or colcon install them)."""
+    found = (scenes.parents[1] / "urdf" / URDF_NAME for scenes in scene_dirs())
+    return next((p for p in found if p.is_file()), None)
 
 
 class Arm3D:
@@ -83,7 +77,7 @@ class Arm3D:
                 vectors=[(0.0, -GRAVITY_SCALE * gravity, 0.0)], colors=[(100, 150, 255)],
                 labels=[f"g {gravity:g} m/s²"], radii=[0.015]), static=True)
         if torques:
-            for path, link, color in zip(TORQUE_PATHS, LINKS, COLORS):
+            for path, link, color in zip(TORQUE_PATHS, LINKS, JOINT_COLORS):
                 stream.log(path, rr.CoordinateFrame(link), rr.Arrows3D.from_fields(
                     colors=[color], radii=[0.02]), static=True)
 

@@ -67,7 +67,9 @@ NODE_SERIES = {
                               (110, 230, 110)),
     "node/substeps": ("Sub-steps / tick", "RK sub-steps in the tick", "1/tick", (90, 180, 255)),
 }
-# The error books, one row per step (readouts.accuracy_values): (series name, colour, width).
+# The error books (readouts.accuracy_values), at the steps sampled: every step under
+# recorder.step, every BOOKS_EVERY-th and each batch's last under step_batch (telemetry.py):
+# (series name, colour, width).
 ACCURACY_SERIES = {
     LOCAL_ERROR: ("local error estimate", (255, 170, 60), NARROW),
     ACCUMULATED_ERROR: ("accumulated error estimate", (90, 180, 255), NARROW),
@@ -200,15 +202,6 @@ TRUST = "Can I trust this run?"
 OVERVIEW = "Arm, energy books, joints"
 
 
-def held_by(snap) -> str:
-    """What holds each step's local error, for the local error pane's title."""
-    if snap.adaptive:
-        return f"held by {snap.scene.integrator}'s rtol and atol"
-    if snap.tolerance:
-        return f"tolerance {snap.tolerance:g} per s (scaled error: max |e_q|, |e_qd|/(1+|qd|))"
-    return "tolerance 0: estimate only"
-
-
 def trust_view(snap) -> rrb.Vertical:
     """One look at whether to believe the run: the energy books close (the residual, J),
     each step's local error estimate and their sum (rad, rad/s; the tolerance in the title:
@@ -224,17 +217,19 @@ def trust_view(snap) -> rrb.Vertical:
             name=title, contents=list(named), plot_legend=legend,
             overrides={path: rr.SeriesLines.from_fields(names=[drawable(name)])
                        for path, name in named.items()})
+    none = "" if snap.estimates else " (no error estimate for these steps)"
+    counted = SUBSTEPS in accuracy_paths(snap)    # dopri5 adapts its own step: none to count
     panes = [pane(f"Energy balance residual [J]: flat at 0 when the books close "
-                  f"(E(0) = {snap.initial_energy:.6g} J)",
+                  f"(E(0) = {snap.initial_energy:.6g} J){'' if counted else none}",
                   {RESIDUAL[0]: "residual E−E₀−inputs+losses [J]"})]
     if snap.estimates:
-        panes += [pane(f"Local error per step [rad, rad/s]; {held_by(snap)}",
+        panes += [pane(f"Local error per step [rad, rad/s]; {snap.held_by}",
                        {LOCAL_ERROR: "local error estimate [rad, rad/s]"}),
                   pane("Accumulated error [rad, rad/s]: estimate of the global error",
                        {ACCUMULATED_ERROR: "accumulated error estimate [rad, rad/s]"})]
-    none = "" if snap.estimates else " (no error estimate for these steps)"
-    panes.append(pane(f"Sub-steps per step: what accuracy and stability cost{none}",
-                      {SUBSTEPS: "sub-steps per step [1]"}))
+    if counted:
+        panes.append(pane(f"Sub-steps per step: what accuracy and stability cost{none}",
+                          {SUBSTEPS: "sub-steps per step [1]"}))
     events = rrb.TextLogView(name="Events: sub-stepping, saturation, switches, faults",
                              origin="events")
     return rrb.Vertical(rrb.Grid(*panes, grid_columns=2), events, row_shares=[3, 1],

@@ -16,14 +16,11 @@ def nanoseconds(seconds):
     return np.rint(seconds * 1e9).astype("timedelta64[ns]")
 
 
-def time_column(ns):
-    return rr.TimeColumn(TIMELINE, duration=ns)
-
-
 def time_columns(ns, wall_ns, stamp_origin_ns=None):
     """The rows' timelines: sim_time (`ns`, timedelta64), log_time (`wall_ns`, ns since the
     epoch) and, with a stamp origin, ros_time = stamp_origin_ns + sim_time."""
-    columns = [time_column(ns), rr.TimeColumn(LOG_TIME, timestamp=wall_ns.astype("datetime64[ns]"))]
+    columns = [rr.TimeColumn(TIMELINE, duration=ns),
+               rr.TimeColumn(LOG_TIME, timestamp=wall_ns.astype("datetime64[ns]"))]
     if stamp_origin_ns is not None:
         stamps = ns.astype(np.int64) + np.int64(stamp_origin_ns)
         columns.append(rr.TimeColumn(ROS_TIME, timestamp=stamps.astype("datetime64[ns]")))

@@ -23,8 +23,12 @@ from contextlib import suppress
 
 from ..usage import UsageError
 
-CSV_COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2", "kinetic", "potential", "total",
-               "work", "dissipated", "residual", "error_estimate", "accumulated_error")
+# A row, in CsvRecorder.step's order: the state (then any extra states), the torque and the
+# energies (then the scene's other channels), the residual and the error books.
+STATE_COLUMNS = ("t", "q1", "q2", "qd1", "qd2")
+ENERGY_COLUMNS = ("tau1", "tau2", "kinetic", "potential", "total", "work", "dissipated")
+CLOSING_COLUMNS = ("residual", "error_estimate", "accumulated_error")
+CSV_COLUMNS = STATE_COLUMNS + ENERGY_COLUMNS + CLOSING_COLUMNS   # the bare arm's
 BOOKS = ("work", "dissipated")
 BLOCK_BYTES = 1 << 16
 
@@ -40,8 +44,7 @@ def let_writes_fail_on_file_size_limit() -> None:
 def csv_columns(sim) -> tuple[str, ...]:
     """The scene's columns: CSV_COLUMNS with its extra states and other channels added."""
     others = tuple(c for c in sim.channels if c not in BOOKS)
-    return (CSV_COLUMNS[:5] + tuple(sim.extra) + CSV_COLUMNS[5:12] + others
-            + CSV_COLUMNS[12:])
+    return STATE_COLUMNS + tuple(sim.extra) + ENERGY_COLUMNS + others + CLOSING_COLUMNS
 
 
 class CsvRecorder:

@@ -2,10 +2,11 @@
 (properties.py wrote them) and its scalar series as one table on simulated time, for
 `arm-sim inspect` and the tests.
 
-table() gives one row per simulated time at which any series has a value: sim_time (s),
-ros_time and log_time (ns since the epoch; empty where a recording lacks them), then every
-series' values, a column per component, headed `entity path:series name [unit]` (the series
-names and units are the recording's own static SeriesLines names and `unit` values).
+table(read(path)) gives one row per simulated time at which any series has a value:
+sim_time (s), ros_time and log_time (ns since the epoch; empty where a recording lacks
+them), then every series' values, a column per component, headed `entity path:series
+name [unit]` (the series names and units are the recording's own static SeriesLines names
+and `unit` values).
 """
 from __future__ import annotations
 
@@ -87,10 +88,11 @@ def headers(entity: str, static: dict, width: int) -> list[str]:
     return [f"{entity}:{names[i] if i < len(names) else i}{suffix}" for i in range(width)]
 
 
-def table(path):
-    """(header, rows) of the recording's scalar series on simulated time (see the module's
-    docstring); rows in sim_time order, None where a series has no value at that time."""
-    props, statics, temporal = read(path)
+def table(recording):
+    """(header, rows) of a recording's scalar series on simulated time (see the module's
+    docstring), from what read() gave; rows in sim_time order, None where a series has no
+    value at that time."""
+    props, statics, temporal = recording
     listed = props.get("units", {}).get("path") or []
     listed = [listed] if isinstance(listed, str) else listed   # the units' order first
     times, values, columns = {}, defaultdict(dict), {}

@@ -23,6 +23,7 @@ from types import FunctionType
 
 import numpy as np
 
+from ..physics import model
 from ..physics.effects import Effect
 from ..physics.integrators import INTEGRATORS
 
@@ -42,6 +43,15 @@ def stores_energy(effect) -> bool:
     inductance. Motors without windings store none apart from T (the rotors are in M)."""
     return (type(effect).stored_energy is not Effect.stored_energy
             and getattr(effect, "windings", True))
+
+
+def held_by(scene) -> str:
+    """What holds a scene's local error: its tolerance (a scaled error per simulated
+    second), or for an embedded pair (dopri5) its rtol and atol."""
+    if INTEGRATORS[scene.integrator].adaptive:
+        return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
+    return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))"
+            if scene.tolerance else "tolerance 0 (estimate only)")
 
 
 def channel_path(name: str, kind: str) -> str:
@@ -65,7 +75,7 @@ class Snapshot:
     default: those of the scene's initial state."""
 
     def __init__(self, sim, initial: dict | None = None):
-        dynamics = self.dynamics = sim.dynamics
+        dynamics = sim.dynamics
         self.scene, self.arm, self.step_size = sim.scene, sim.arm, sim.step_size
         self.extra, self.channels = tuple(sim.extra), tuple(sim.channels)
         self.kinds = dict(zip(self.channels, dynamics.channel_kinds))
@@ -78,11 +88,11 @@ class Snapshot:
         self.arm3d = None         # the recorder's 3D arm (arm3d.Arm3D), when the URDF is this arm
         self.initial_energy = sim.initial_energy
         # (inputs, losses) booked by channels a live change removed (damping set to 0 ...)
-        self.retired = tuple(getattr(sim, "retired", (0.0, 0.0)))
+        self.retired = tuple(sim.retired)
         self.estimates = sim.error_estimate == sim.error_estimate   # NaN: not estimated
-        # An embedded pair (dopri5) is held by rtol and atol, not by `tolerance`.
-        self.tolerance = sim.scene.tolerance
-        self.adaptive = getattr(INTEGRATORS[sim.scene.integrator], "adaptive", False)
+        self.held_by = held_by(sim.scene)
+        # An embedded pair (dopri5) adapts its own step: it has no sub-steps to count.
+        self.adaptive = INTEGRATORS[sim.scene.integrator].adaptive
         self._torque = vectorised(dynamics.torque_function) if self.drives else None
         if initial is None:
             scene = sim.scene
@@ -107,7 +117,7 @@ class Snapshot:
     def key(self) -> tuple:
         """What the blueprint and the series' styles depend on."""
         return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
-                self.commanded, self.estimates, self.adaptive, self.tolerance)
+                self.commanded, self.estimates, self.held_by, self.initial_energy)
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -125,11 +135,14 @@ def vectorised(function):
     return FunctionType(function.__code__, names, function.__name__)
 
 
+_potential_energy = vectorised(model.potential_energy)
+
+
 def energies(snap: Snapshot, states):
     """Kinetic energy (links and rotors) and {part: stored energy} of each effect that
     stores some, for (n, width) states: Simulator.energies term for term in numpy (the
     scalar calls cost more than the RK4 step itself; see benchmarks/bench_telemetry.py)."""
-    q1, q2, u1, u2 = states[:, 0], states[:, 1], states[:, 2], states[:, 3]
+    q2, u1, u2 = states[:, 1], states[:, 2], states[:, 3]
     a, b, d, m22 = snap.arm.mass_constants
     c2 = np.cos(q2)
     m11 = a + 2.0 * b * c2
@@ -139,16 +152,15 @@ def energies(snap: Snapshot, states):
 
 
 def _stored(snap: Snapshot, effect, states, at):
-    q1, q2 = states[:, 0], states[:, 1]
-    if effect.name == "gravity":          # model.potential_energy, vectorised
-        k1, k2 = snap.arm.gravity_coefficients
-        return effect.gravity * (k1 * np.sin(q1) + k2 * np.sin(q1 + q2))
-    extra = tuple(states[:, at].T)
-    try:                                  # springs, windings: plain arithmetic
-        value = effect.stored_energy(snap.arm, (q1, q2), extra)
-    except TypeError:                     # math on arrays: one row at a time
-        value = [effect.stored_energy(snap.arm, row[:2], tuple(row[at])) for row in states]
-    return np.broadcast_to(np.asarray(value, dtype=float), q1.shape)
+    """An effect's stored energy for every row: its own stored_energy on arrays (springs,
+    windings, joint limits are plain arithmetic); gravity's calls math.sin, so it runs as
+    model.potential_energy on numpy's."""
+    q = states[:, 0], states[:, 1]
+    if effect.name == "gravity":
+        value = _potential_energy(snap.arm, q, effect.gravity)
+    else:
+        value = effect.stored_energy(snap.arm, q, tuple(states[:, at].T))
+    return np.broadcast_to(np.asarray(value, dtype=float), q[0].shape)
 
 
 def channel_values(snap: Snapshot, states, commands) -> dict:
@@ -204,10 +216,17 @@ def unpack(runs, states, n):
     return steps, states, commands
 
 
+def error_books(sim) -> tuple:
+    """The error books after sim's latest step, as accuracy_values takes each row of them:
+    (step, error_estimate, accumulated_error, substeps_taken)."""
+    return sim.steps, sim.error_estimate, sim.accumulated_error, sim.substeps_taken
+
+
 def accuracy_paths(snap: Snapshot) -> list[str]:
     """The error books' entities: the estimates where the simulator makes them, and the
-    sub-steps always."""
-    return ([LOCAL_ERROR, ACCUMULATED_ERROR] if snap.estimates else []) + [SUBSTEPS]
+    sub-steps unless the integrator adapts its own step (dopri5 takes no sub-steps)."""
+    return (([LOCAL_ERROR, ACCUMULATED_ERROR] if snap.estimates else [])
+            + ([] if snap.adaptive else [SUBSTEPS]))
 
 
 def accuracy_values(snap: Snapshot, steps, books, before: tuple):
@@ -240,6 +259,7 @@ def accuracy_values(snap: Snapshot, steps, books, before: tuple):
         known = np.flatnonzero(is_step & np.isfinite(local) & np.isfinite(accumulated))
         values[LOCAL_ERROR] = rows[known], local[known]
         values[ACCUMULATED_ERROR] = rows[known], accumulated[known]
-    known = np.flatnonzero(is_step & np.isfinite(mean))
-    values[SUBSTEPS] = rows[known], mean[known]
+    if not snap.adaptive:
+        known = np.flatnonzero(is_step & np.isfinite(mean))
+        values[SUBSTEPS] = rows[known], mean[known]
     return values, per_row, (float(at[-1]), float(taken[-1]))

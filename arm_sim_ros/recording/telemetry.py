@@ -19,11 +19,13 @@ consecutive steps under one held command: [first step, command (None without a c
 policy), steps]. A sink that fails (unwritable file, no viewer at the address, a viewer
 that dies) is one warning; the simulation runs on.
 
-The error books (sim.steps, error_estimate, accumulated_error, substeps_taken, flat) go
-with the states of every BOOKS_EVERY-th step (`books_every`; the callers sample them) and
-of each batch's last: reading them costs ~0.6 µs, 15 % of a plain step (the simulator
-counts the sums when asked), while the estimate changes only at a check (every 16-64
-steps), so a sample every 8 steps loses little. recorder.step(sim) records every step's.
+The error books (readouts.error_books, flat) go with the states of every BOOKS_EVERY-th
+step (`books_every`; the callers sample them) and of each batch's last: reading them costs
+~0.6 µs, 15 % of a plain step (the simulator counts the sums when asked). Under RK4 the
+estimate changes only at a check (every 16 steps, 32 while it is well under the
+tolerance; physics/accuracy.py), so a sample every 8 steps loses little; dopri5's steps
+and a switching scene's steps with a switch are estimated every step, and there a sample
+is one step's estimate in 8. recorder.step(sim) records every step's.
 """
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ import rerun as rr
 from .arm3d import arm3d_for
 from .blueprint import blueprint, styles
 from .properties import send_properties
-from .readouts import Snapshot
+from .readouts import Snapshot, error_books, held_by
 from .sinks import open_sinks
 from .writer import BatchWriter
 
@@ -59,8 +61,8 @@ LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
 
 class RerunRecorder:
     """A recorder for cli.RUN_RECORDERS and the node: start / step or step_batch / flush /
-    event / finish. start(sim) may be called again after a reset or for a new Simulator
-    (step() also notices a new one). Simulated time going back (a reset) continues the
+    event / finish. start(sim) may be called again after a reset, for a new Simulator
+    (step() also notices a new one) or after a live change (it carries on). Simulated time going back (a reset) continues the
     timeline from where the last run ended, as the node's JointState stamps do."""
 
     def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
@@ -103,8 +105,11 @@ class RerunRecorder:
         self.stamp_origin_ns = self._writer.stamp_origin_ns = stamp_origin_ns
 
     def start(self, sim) -> None:
-        """Begin (or, after a reset or for a new Simulator, continue) with sim's initial row."""
-        self._bind(sim)
+        """Begin (or, after a reset or for a new Simulator, continue) with sim's initial row.
+        The simulator already bound carrying on (its effects changed live: set_payload,
+        change_scene) is only bound again: its steps go on, under the run's E(0)."""
+        if self._bind(sim):
+            return
         self._walls.append((self._waiting, time.time_ns()))
         self.event(start_line(sim))
         self.step(sim)
@@ -120,12 +125,13 @@ class RerunRecorder:
         are copied, so the caller may reuse the list; `books`: the error books of every
         books_every-th step among them (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
-            self._bind(sim, rebuilt=sim is self.sim)
+            self._bind(sim)
         n = len(states)
         if n == 0:
             return
+        snap = self._snapshot     # None: it could not be made, and telemetry is off
         extend_runs(self._runs, sim.steps - n + 1,
-                    tuple(sim.dynamics.command) if self._commanded else None, n)
+                    tuple(sim.dynamics.command) if snap and snap.commanded else None, n)
         self._next = sim.steps + 1
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
         self._books.fromlist(with_last(books, sim))
@@ -185,16 +191,18 @@ class RerunRecorder:
 
     # -- binding a simulator --------------------------------------------------------------
 
-    def _bind(self, sim, rebuilt: bool = False) -> None:
+    def _bind(self, sim) -> bool:
         """Rows buffered so far belong to the previous simulator (or to sim's dynamics
-        before a payload change, `rebuilt`, which keeps the run's E(0)): send them first.
-        The simulator's own events (sub-stepping, refused steps) go to the text log."""
+        before a live change): send them first. Returns whether sim carries on the run
+        (the same simulator, not reset), which keeps the run's E(0). The simulator's own
+        events (sub-stepping, refused steps) go to the text log."""
         previous = self.sim
+        carried = sim is previous and sim.steps + 1 >= self._next
         if previous is not None:
             self.flush(force=True)
-        initial = self._snapshot.initial if rebuilt and self._snapshot is not None else None
-        self.sim, self._dynamics, self._snapshot, self._next = sim, sim.dynamics, None, sim.steps
-        self._commanded = sim.scene.policy.startswith("command")
+        initial = self._snapshot.initial if carried and self._snapshot is not None else None
+        self.sim, self._dynamics, self._snapshot = sim, sim.dynamics, None
+        self._next = sim.steps + carried      # the next step to record
         self._guard(self._describe, sim, initial)
         if sim is not previous:
             if previous is not None and self._on_sim_event in previous.event_listeners:
@@ -202,11 +210,12 @@ class RerunRecorder:
             for earlier in sim.events:
                 self._on_sim_event(earlier)
             sim.event_listeners.append(self._on_sim_event)
+        return carried
 
     def _describe(self, sim, initial=None) -> None:
         """Open the sinks (first time) and log what does not change from step to step."""
         snap = self._snapshot = Snapshot(sim, initial)
-        snap.arm3d = arm3d_for(snap.arm)
+        snap.arm3d = arm3d_for(sim.scene.links)   # the URDF has no payload
         layout = snap.key
         if self._layout is None:
             board = blueprint(snap, self.live, self.node)
@@ -233,11 +242,7 @@ class RerunRecorder:
         """In the sender thread: each batch in the order flush() queued it."""
         if self.enabled:
             with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
-                self._guard(self._send, *batch)
-
-    def _send(self, snap, runs, states, events, ticks, walls, books) -> None:
-        """One batch, as flush() queued it."""
-        self._writer.send(snap, runs, states, events, ticks, walls, books)
+                self._guard(self._writer.send, *batch)
 
     # -- failures -----------------------------------------------------------------------
 
@@ -297,8 +302,9 @@ def extend_runs(runs, first: int, command, n: int) -> None:
 
 def with_last(books, sim) -> list:
     """Error books sampled (flat) and, unless among them, those of sim's last step."""
-    last = [sim.steps, sim.error_estimate, sim.accumulated_error, sim.substeps_taken]
-    return list(books) + ([] if books and books[-4] == sim.steps else last)
+    if books and books[-4] == sim.steps:
+        return list(books)
+    return [*books, *error_books(sim)]
 
 
 def start_line(sim) -> str:
@@ -307,7 +313,7 @@ def start_line(sim) -> str:
                 else ", no error estimate: the simulator does not estimate these steps")
     return (f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
             f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
-            f"{sim.scene.integrator}, tolerance {sim.scene.tolerance:g} per s{estimate}, "
+            f"{sim.scene.integrator}, {held_by(sim.scene)}{estimate}, "
             f"E0 = {sim.initial_energy:.9g} J")
 
 

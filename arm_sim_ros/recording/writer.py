@@ -39,22 +39,19 @@ class BatchWriter:
         self._books_before = (0.0, 0.0)   # (step, substeps_taken) of the last books sent
         self._row_substeps = np.zeros(0)   # sub-steps of each row of the batch (nan: unknown)
 
-    def send(self, snap, runs, states, events, ticks=(), walls=(), books=None) -> None:
+    def send(self, snap, runs, states, events, ticks, walls, books) -> None:
         """Runs of [first step, command, steps] with their flattened states, text lines
         (rows waiting before them, text, level) and the node's ticks (row, values), each at
         its row (the last one if none), the wall clock marks of the batch, and the error
-        books sampled in it, flattened (step, error_estimate, accumulated_error,
-        substeps_taken; the batch's last step among them)."""
+        books sampled in it, flattened (readouts.error_books; the batch's last step among
+        them, telemetry.with_last)."""
         n = sum(steps for _, _, steps in runs)
         if n:
             steps, states, commands = unpack(runs, states, n)
             self._timeline(steps * snap.step_size)
             self._wall_clock(n, walls)
             self._send_rows(snap, steps, states, commands)
-            if books:
-                self._send_accuracy(snap, steps, np.frombuffer(books, float).reshape(-1, 4))
-            else:
-                self._row_substeps = np.full(n, nan)
+            self._send_accuracy(snap, steps, np.frombuffer(books, float).reshape(-1, 4))
         if events:
             rows = [i for i, _, _ in events]
             self._send_columns("events", self._index(rows, n), rr.TextLog.columns(
@@ -87,9 +84,8 @@ class BatchWriter:
         return self._columns(self._row_ns[at], self._row_wall[at])
 
     def _columns(self, ns, wall):
-        origin = self.stamp_origin_ns
         return time_columns(np.asarray(ns, "timedelta64[ns]"), np.asarray(wall, "int64"),
-                            None if origin is None else origin)
+                            self.stamp_origin_ns)
 
     def _wall_clock(self, n, walls) -> None:
         """Each row's log_time: the wall clock of the step_batch call that brought it, rows

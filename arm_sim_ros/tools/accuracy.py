@@ -32,9 +32,9 @@ from ..physics.simulator import Simulator
 from ..usage import UsageError
 from . import accuracy_report as report
 from . import mujoco_peer
-from .accuracy_report import cheapest  # noqa: F401  (part of the study's interface)
-from .accuracy_runs import (REFERENCE_TOLERANCE, Run, measure, measure_mujoco,  # noqa: F401
-                            measure_simulator, reference, reference_and_label, sample_times)
+from .accuracy_report import TARGET, cheapest  # noqa: F401  (part of the study's interface)
+from .accuracy_runs import (Run, measure, measure_mujoco, measure_simulator,  # noqa: F401
+                            reference, reference_and_label, sample_times)
 from .arguments import add_scene_arguments, scene_from_args
 from .progress import Progress
 
@@ -49,7 +49,6 @@ MIN_TOLERANCE = 1e-14
 DEFAULT_SWEEP = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)   # the scene key `tolerance`
 SWEEP_MIN_ORDER = 3     # lower orders would need up to 10^4 sub-steps a step to meet these
 PEERS = ("mujoco",)
-TARGET = 1e-6                   # the price list: the cheapest run at least this accurate
 
 
 def fitted_order(runs: list[Run]) -> float | None:
@@ -68,7 +67,7 @@ def fitted_order(runs: list[Run]) -> float | None:
 def has_estimate(scene: Scene) -> bool:
     """True where the scene's steps carry an error estimate, so a tolerance can act."""
     estimate = Simulator(scene).error_estimate
-    return estimate == estimate                 # NaN: no estimate (modes switch)
+    return estimate == estimate                 # NaN: the stability plan refuses the steps
 
 
 def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers, repeat):
@@ -80,16 +79,15 @@ def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers, r
     plan += [(f"{n} tol={t:g}", lambda n=n, t=t: measure(scene, n, scene.step_size, t, times,
                                                           ref, repeat))
              for n in adaptive for t in tolerances]
-    plan.append(("as set", lambda: measure_simulator(scene, times, ref, repeat,
-                                                     f"{scene.integrator} (scene as set)")))
+    plan.append(("as set", lambda: measure_simulator(scene, times, ref, repeat, "as set")))
     notes = []
     swept = [n for n in fixed if INTEGRATORS[n].order >= SWEEP_MIN_ORDER]
     if sweep and swept and not has_estimate(scene.replace(integrator=swept[0])):
-        notes.append("tolerance sweep: none (this scene's steps switch modes and carry no "
-                     "error estimate, so a tolerance does not act)")
+        notes.append("tolerance sweep: none (the stability plan refuses this scene's steps, "
+                     "so they carry no error estimate and a tolerance does not act)")
         swept = []
     plan += [(f"{n} tolerance={t:g}", lambda n=n, t=t: measure_simulator(
-        scene.replace(integrator=n, tolerance=t), times, ref, repeat, f"{n} + tolerance"))
+        scene.replace(integrator=n, tolerance=t), times, ref, repeat, "tolerance"))
         for n in swept for t in sweep]
     peer = {}
     if "mujoco" in peers:
@@ -126,17 +124,13 @@ def study(scene: Scene, duration: float, integrators, steps, tolerances, progres
     if progress:
         progress(len(plan), len(plan), "done")
     orders = {n: fitted_order([r for r in runs if r.series == n]) for n in fixed}
-    if "notes" in peer and any(effect in mujoco_peer.SOFT for effect in effects_of(scene)):
-        theirs = [r.max_state_error for r in runs if r.series.startswith("mujoco")]
+    if "notes" in peer and any(getattr(scene, e) is not None for e in mujoco_peer.SOFT):
+        theirs = [r.max_state_error for r in runs if r.kind == "mujoco"]
         peer["floor"] = min(theirs)   # soft constraints: MuJoCo's error stops falling here
     return {"scene": scene.name, "duration": duration, "sample_interval": interval,
             "reference": label, "runs": [asdict(r) for r in runs], "notes": notes,
             "peers": {"mujoco": peer} if peer else {},
             "orders": {n: {"fitted": o, "theory": INTEGRATORS[n].order} for n, o in orders.items()}}
-
-
-def effects_of(scene: Scene) -> list[str]:
-    return [e for e in mujoco_peer.SOFT if getattr(scene, e) is not None]
 
 
 def _positive_list(values, what: str, above: float = 0.0, below: float | None = None) -> list[float]:

@@ -10,6 +10,7 @@ from ..usage import UsageError
 MARKERS = "osD^v<>pPX*h"
 PANEL_SIZE = (6.4, 4.6)          # inches per panel
 MAX_COLUMNS = 2
+TARGET = 1e-6                   # the price list: the cheapest run at least this accurate
 
 
 def _number(value, spec: str, width: int) -> str:
@@ -42,9 +43,9 @@ def format_table(result: dict) -> str:
         lines.append(f"MuJoCo's error floor here: {mujoco['floor']:.2e} (its soft constraints "
                      "follow their own law: the error stops falling with h)")
     lines += result["notes"]
-    best = cheapest(result, 1e-6)
+    best = cheapest(result, TARGET)
     if best:
-        lines.append(f"cheapest run with max state error <= 1e-6: {best['series']} "
+        lines.append(f"cheapest run with max state error <= {TARGET:g}: {best['series']} "
                      f"h={best['step_size']:g}"
                      + (f" tol={best['tolerance']:g}" if best["tolerance"] else "")
                      + f" ({best['cpu_s_per_sim_s']:.2e} CPU s per simulated s)")
@@ -58,27 +59,26 @@ def cheapest(result: dict, target: float, runs=None):
     return min(good, key=lambda r: r["cpu_s_per_sim_s"], default=None)
 
 
-def pick(result: dict, target: float, series) -> dict | None:
-    """Of the runs in `series`: the cheapest at least `target` accurate, else the most
-    accurate one (None if the series did not run)."""
-    runs = [r for r in result["runs"] if series(r["series"])]
+def pick(result: dict, target: float, kind: str, integrator: str | None = None) -> dict | None:
+    """Of the runs of `kind` (of `integrator`, if given): the cheapest at least `target`
+    accurate, else the most accurate one (None if none ran)."""
+    runs = [r for r in result["runs"] if r["kind"] == kind
+            and integrator in (None, r["integrator"])]
     return cheapest(result, target, runs) or min(runs, key=lambda r: r["max_state_error"],
                                                  default=None)
 
 
 def price_columns(result: dict, target: float) -> list:
     """(label, run) per column of the price list for one scene."""
-    at_h = result["runs"][0]["step_size"] if result["runs"] else None
-    as_set = next((r for r in result["runs"] if r["series"].endswith("(scene as set)")), None)
-    at_h = as_set["step_size"] if as_set else at_h
-    mujoco_at_h = [r for r in result["runs"] if r["series"].startswith("mujoco")
-                   and r["step_size"] == at_h]
+    as_set = next((r for r in result["runs"] if r["kind"] == "as set"), None)
+    at_h = as_set["step_size"] if as_set else None
+    mujoco_at_h = [r for r in result["runs"] if r["kind"] == "mujoco" and r["step_size"] == at_h]
     return [("ours as set", as_set),
-            ("ours rk4 + tolerance", pick(result, target, lambda s: s == "rk4 + tolerance")),
-            ("ours dopri5", pick(result, target, lambda s: s == "dopri5")),
+            ("ours rk4 + tolerance", pick(result, target, "tolerance", "rk4")),
+            ("ours dopri5", pick(result, target, "method", "dopri5")),
             ("MuJoCo best at the scene's h", min(mujoco_at_h, default=None,
                                                 key=lambda r: r["max_state_error"])),
-            ("MuJoCo cheapest", pick(result, target, lambda s: s.startswith("mujoco")))]
+            ("MuJoCo cheapest", pick(result, target, "mujoco"))]
 
 
 def price_list(results: list, target: float) -> str:
@@ -122,13 +122,12 @@ def plot(results, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    results = [results] if isinstance(results, dict) else results
     columns = min(MAX_COLUMNS, len(results))
     rows = ceil(len(results) / columns)
     fig, axes = plt.subplots(rows, columns, squeeze=False, dpi=100,
                              figsize=(PANEL_SIZE[0] * columns, PANEL_SIZE[1] * rows + 0.9))
-    names = list(dict.fromkeys(r["series"] for result in results for r in result["runs"]))
-    style = {name: _style(name, i) for i, name in enumerate(names)}
+    kinds = {r["series"]: r["kind"] for result in results for r in result["runs"]}
+    style = {name: _style(kind, i) for i, (name, kind) in enumerate(kinds.items())}
     for ax, result in zip(axes.flat, results):
         panel(ax, result, style)
     for ax in list(axes.flat)[len(results):]:
@@ -147,13 +146,13 @@ def plot(results, path: str) -> None:
     plt.close(fig)
 
 
-def _style(name: str, i: int) -> dict:
-    if name.startswith("mujoco"):
+def _style(kind: str, i: int) -> dict:
+    if kind == "mujoco":
         return {"linestyle": "--", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
                 "linewidth": 1.2, "alpha": 0.85}
-    if name.endswith("(scene as set)"):
+    if kind == "as set":
         return {"linestyle": "none", "marker": "*", "markersize": 13, "color": "black"}
-    if name.endswith("+ tolerance"):
+    if kind == "tolerance":
         return {"linestyle": "-", "marker": "s", "markersize": 5, "linewidth": 2.2,
                 "color": "crimson"}
     return {"linestyle": "-", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
@@ -161,11 +160,11 @@ def _style(name: str, i: int) -> dict:
 
 
 def _label(name: str, run: dict) -> str:
-    if name.startswith("mujoco"):
+    if run["kind"] == "mujoco":
         return f"MuJoCo {name[7:]}, h sweep (mj_step)"
-    if name.endswith("(scene as set)"):
+    if run["kind"] == "as set":
         return "ours as set: scene's h and tolerance (Simulator.step)"
-    if name.endswith("+ tolerance"):
+    if run["kind"] == "tolerance":
         return f"ours {name} sweep, scene's h (Simulator.step)"
     if run["tolerance"] is not None:
         return f"ours {name}, rtol = atol sweep"
@@ -181,7 +180,7 @@ def panel(ax, result: dict, style: dict) -> None:
         label = _label(name, runs[0])
         ax.loglog([r["cpu_s_per_sim_s"] * 1e6 for r in runs],
                   [r["max_state_error"] for r in runs], label=label, **style[name])
-        if name.endswith("+ tolerance"):          # which tolerance each point is
+        if runs[0]["kind"] == "tolerance":          # which tolerance each point is
             for r in runs[::2]:
                 ax.annotate(f"{r['tolerance']:g}", (r["cpu_s_per_sim_s"] * 1e6,
                                                    r["max_state_error"]),
@@ -193,7 +192,7 @@ def panel(ax, result: dict, style: dict) -> None:
                    label="MuJoCo's floor (soft constraints)")
         ax.annotate("MuJoCo floor", (0.01, floor), xycoords=("axes fraction", "data"),
                     xytext=(2, 3), textcoords="offset points", fontsize=7, color="tab:purple")
-    ax.axhline(1e-6, color="grey", linestyle=":", linewidth=1)
+    ax.axhline(TARGET, color="grey", linestyle=":", linewidth=1)
     ax.set_xlabel("CPU µs per simulated second (lower is cheaper)")
     ax.set_ylabel("max |state error| (rad, rad/s)")
     ax.set_title(f"{result['scene']} ({result['duration']:g} s)", fontsize=10)

@@ -19,6 +19,8 @@ REFERENCE_TOLERANCE = 1e-13
 MODEL_EFFECTS = {"gravity", "damping", "actuator"}    # what model.forward_dynamics covers
 MIN_TIMED_CPU_S = 0.05          # repeat short runs until this much CPU time, keep the fastest
 HYBRID_STEP = 2.5e-4   # the largest step of the reference of scenes that switch modes
+# What a run is (Run.kind) and its line's name after the integrator's (Run.series).
+SERIES = {"method": "", "as set": " (scene as set)", "tolerance": " + tolerance"}
 
 
 @dataclass
@@ -33,6 +35,7 @@ class Run:
     cpu_s_per_sim_s: float
     series: str = ""              # its line: the integrator, "rk4 + tolerance", "mujoco RK4"
     substeps: int | None = None   # sub-steps taken (Simulator.substeps_taken)
+    kind: str = "method"          # a SERIES key (the tableau's sweeps), or "mujoco"
 
     def __post_init__(self):
         self.series = self.series or self.integrator
@@ -50,7 +53,8 @@ def switches(scene: Scene) -> bool:
 
 def reference(scene: Scene, times) -> list[tuple]:
     """(q1, q2, qd1, qd2, *extra, *channels) at `times`: scipy's DOP853 at rtol = atol =
-    1e-13, or for a scene that switches modes, our dopri5 with the switches located."""
+    1e-13, or for a scene that switches modes, our rk4 at a fine step with the switches
+    located (hybrid_reference)."""
     return reference_and_label(scene, times)[0]
 
 
@@ -98,22 +102,41 @@ def hybrid_reference(scene: Scene, times) -> tuple[list[tuple], str]:
     runs = []
     for step in (h, h / 2):
         sim = Simulator(scene.replace(integrator="rk4", step_size=step, tolerance=0.0))
-        runs.append(stepped(sim, len(times) - 1, round(interval / step) if interval else 1)[0])
+        runs.append(stepped(sim, len(times) - 1, round(interval / step) if interval else 1,
+                            books=False)[0])
     gap = max(abs(a - b) for s, r in zip(*runs) for a, b in zip(s[:4], r[:4]))
     return runs[1], (f"ours rk4, switches located, h={h / 2:g} (itself at h={h:g}: within "
                      f"{gap:.1e})")
 
 
-def stepped(sim: Simulator, samples: int, every: int) -> tuple[list, float]:
-    """(states at the start and every `every`-th step, largest |residual| at any step)."""
+def stepped(sim: Simulator, samples: int, every: int, books: bool = True) -> tuple[list, float]:
+    """(states at the start and every `every`-th step, largest |residual| at any step; 0.0
+    unless `books`)."""
     kept, residual = [sim.state], 0.0
     for n in range(1, samples * every + 1):
         sim.step()
-        books = abs(sim.residual())
-        residual = max(residual, books if isfinite(books) else float("inf"))
+        if books:
+            residual = max(residual, abs_residual(sim))
         if n % every == 0:
             kept.append(sim.state)
     return kept, residual
+
+
+def abs_residual(sim: Simulator) -> float:
+    """|the balance residual| of the simulator's state; a non-finite one is infinite."""
+    books = abs(sim.residual())
+    return books if isfinite(books) else float("inf")
+
+
+def cadence(scene: Scene, times, step_size: float | None = None) -> tuple[int, int]:
+    """(steps between samples, steps in all) of a run at `step_size` (else the scene's)."""
+    every = scene.steps_for(times[1] - times[0], step_size) if len(times) > 1 else 1
+    return every, every * (len(times) - 1)
+
+
+def per_simulated_second(seconds: float, times) -> float:
+    duration = times[-1] - times[0]
+    return seconds / duration if duration > 0 else 0.0
 
 
 class _Counted:
@@ -156,17 +179,16 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
             ref, repeat: int = 1) -> Run:
     """One method at one step size (or tolerance) against the reference samples; the bare
     tableau step, except where the scene switches modes (only Simulator.step does that)."""
+    tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
     if switches(scene):
-        tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
         run = measure_simulator(scene.replace(integrator=name, step_size=step_size,
-                                              tolerance=0.0, **tolerances), times, ref, repeat)
+                                              tolerance=0.0, **tolerances), times, ref, repeat,
+                                "method")
         run.tolerance = tolerance
         return run
     sim = Simulator(scene.replace(integrator=name, step_size=step_size))
-    tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
     step = compile_step(INTEGRATORS[name], len(sim.channels), extra=len(sim.extra), **tolerances)
-    every = scene.steps_for(times[1] - times[0], step_size) if len(times) > 1 else 1
-    total = every * (len(times) - 1)
+    every, total = cadence(scene, times, step_size)
     y0 = sim.state
 
     # Untimed pass: evaluations, the balance residual after every step, the samples.
@@ -175,8 +197,7 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
     for n in range(1, total + 1):
         y = step(counted, y, step_size)
         sim.state = y
-        books = abs(sim.residual())
-        residual = max(residual, books if isfinite(books) else float("inf"))
+        residual = max(residual, abs_residual(sim))
         if n % every == 0:
             samples.append(y)
     sim.state = y0
@@ -192,46 +213,42 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
 
     best = fastest_cpu(run, repeat)
     state_error, drift = errors(sim, samples, ref)
-    duration = times[-1] - times[0]
     return Run(name, step_size, tolerance, state_error, drift, residual, counted.calls,
-               best / duration if duration > 0 else 0.0)
+               per_simulated_second(best, times))
 
 
-def measure_simulator(scene: Scene, times, ref, repeat: int = 1, series: str = "") -> Run:
-    """The scene as set, through Simulator.step (estimator, tolerance, sub-steps, events)."""
+def measure_simulator(scene: Scene, times, ref, repeat: int = 1, kind: str = "as set") -> Run:
+    """The scene as set, through Simulator.step (estimator, tolerance, sub-steps, events);
+    `kind` (a SERIES key) names the run."""
     sim = Simulator(scene)
-    every = scene.steps_for(times[1] - times[0]) if len(times) > 1 else 1
+    every, total = cadence(scene, times)
     samples, residual = stepped(sim, len(times) - 1, every)
     substeps = sim.substeps_taken
 
     def run():
         sim.reset()
         step, kept = sim.step, []
-        for n in range(1, every * (len(times) - 1) + 1):
+        for n in range(1, total + 1):
             step()
             if n % every == 0:
                 kept.append(sim.state)
 
     best = fastest_cpu(run, repeat)
     state_error, drift = errors(sim, samples, ref)
-    duration = times[-1] - times[0]
     adaptive = INTEGRATORS[scene.integrator].adaptive
     return Run(scene.integrator, scene.step_size, scene.rtol if adaptive else scene.tolerance,
-               state_error, drift, residual, None, best / duration if duration > 0 else 0.0,
-               series or scene.integrator, substeps)
+               state_error, drift, residual, None, per_simulated_second(best, times),
+               scene.integrator + SERIES[kind], substeps, kind)
 
 
 def measure_mujoco(scene: Scene, integrator: str, step_size: float, times, ref,
                    repeat: int = 1) -> Run:
     """MuJoCo's `integrator` at `step_size`, sampled and timed as ours are."""
-    at_h = scene.replace(step_size=step_size)
-    runner = mujoco_peer.Runner(at_h, integrator)
-    every = at_h.steps_for(times[1] - times[0]) if len(times) > 1 else 1
-    total = every * (len(times) - 1)
+    runner = mujoco_peer.Runner(scene.replace(step_size=step_size), integrator)
+    every, total = cadence(scene, times, step_size)
     samples = runner.run(total, every)
     best = fastest_cpu(lambda: runner.run(total, every), repeat)
     state_error, drift = errors(Simulator(scene), samples, ref)
-    duration = times[-1] - times[0]
     name = f"mujoco {integrator}"
     return Run(name, step_size, None, state_error, drift, None, None,
-               best / duration if duration > 0 else 0.0, name)
+               per_simulated_second(best, times), name, kind="mujoco")

@@ -8,15 +8,14 @@ the functions that need them, so `arm-sim scenes` starts fast.
 from __future__ import annotations
 
 import importlib
-import json
 import os
 import sys
 import time
 
-from ..physics.integrators import INTEGRATORS
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
+from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
@@ -53,8 +52,8 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     """sim.run(duration) with every recorder seeing every step: step_batch(sim, states,
     books) once per chunk of at most RUN_BATCH_STEPS steps where a recorder has it (a
     Python call per step costs more than logging's 10 % budget; `books`: the error books
-    of every books_every-th step, as telemetry.RerunRecorder.step_batch takes them), else
-    step(sim) after each step.
+    of every books_every-th step (the least of the recorders'), as
+    telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
     (its .requested set by a signal): every recorder has then seen the same last step.
     Returns the largest |residual| seen."""
@@ -62,13 +61,13 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
     states, books = [], []
     keep, book = states.append, books.extend
-    every = min((getattr(r, "books_every", 0) or RUN_BATCH_STEPS for r in batched),
-                default=RUN_BATCH_STEPS)
+    every = min((r.books_every for r in batched), default=0)
 
     def on_step(s):
-        keep(s.state)
-        if s.steps % every == 0:
-            book((s.steps, s.error_estimate, s.accumulated_error, s.substeps_taken))
+        if batched:               # only a recorder with step_batch needs them collected
+            keep(s.state)
+            if s.steps % every == 0:
+                book(error_books(s))
         for step in each:
             step(s)
 
@@ -127,10 +126,9 @@ def cmd_run(args) -> int:
             finish_all(recorders, sim)
     result = sim.sample().as_dict() | {"max_abs_energy_drift": drift, "fault": sim.fault,
                                        "refused_steps": sim.refused_steps,
-                                       # None where the steps are not estimated
-                                       **{k: (v if v == v else None) for k, v in (
-                                           ("error_estimate", sim.error_estimate),
-                                           ("accumulated_error", sim.accumulated_error))},
+                                       # NaN where the steps are not estimated: JSON's null
+                                       "error_estimate": sim.error_estimate,
+                                       "accumulated_error": sim.accumulated_error,
                                        "interrupted_at": sim.time if stop.requested else None}
     for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
         print(f"arm-sim: {event.kind} at t = {event.t:g} s: {event.message}", file=sys.stderr)
@@ -157,8 +155,8 @@ def format_result(scene: Scene, r: dict) -> str:
     def pair(v):
         return "(" + ", ".join(f"{x:.6f}" for x in v) + ")"
 
-    def estimate(v):      # None (JSON's null) or NaN: the scene's steps are not estimated
-        return "n/a" if v is None or v != v else f"{v:.3e}"
+    def estimate(v):      # NaN: the scene's steps are not estimated
+        return "n/a" if v != v else f"{v:.3e}"
 
     currents = [f"{name} = {r[name]:.6f} A" for name in ("i1", "i2") if name in r]
     others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
@@ -178,15 +176,6 @@ def format_result(scene: Scene, r: dict) -> str:
         f"error estimate: latest step {estimate(r['error_estimate'])}, accumulated "
         f"{estimate(r['accumulated_error'])} (rad, rad/s: max over q, qd); {held_by(scene)}",
     ])
-
-
-def held_by(scene: Scene) -> str:
-    """What holds the local error: the tolerance (scaled error per simulated second), or
-    for an embedded pair (dopri5) its rtol and atol."""
-    if INTEGRATORS[scene.integrator].adaptive:
-        return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
-    return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))" if scene.tolerance
-            else "tolerance 0 (estimate only)")
 
 
 def build_parser() -> ArgumentParser:

@@ -31,7 +31,7 @@ def property_lines(props: dict) -> list[str]:
 
 
 def cmd_inspect(args) -> int:
-    from ..recording.readback import RecordingError, properties, table  # rerun: only here
+    from ..recording.readback import RecordingError, read, table  # rerun: only here
 
     path = Path(args.recording)
     if not path.is_file():
@@ -39,11 +39,12 @@ def cmd_inspect(args) -> int:
     if args.every < 1:
         raise UsageError(f"--every {args.every} must be at least 1")
     try:
+        recording = read(path)
         if not args.no_properties:
-            print("\n".join(property_lines(properties(path))))
+            print("\n".join(property_lines(recording[0])))
         if args.properties:
             return 0
-        header, rows = table(path)
+        header, rows = table(recording)
     except RecordingError as error:
         raise UsageError(str(error)) from None
     out = csv.writer(sys.stdout, lineterminator="\n")

@@ -25,7 +25,6 @@ ours: its error against the reference stops falling with h (an error floor).
 """
 from __future__ import annotations
 
-import time
 from math import log, pi, sqrt
 
 from ..physics import model as arm_model
@@ -56,15 +55,14 @@ def version() -> str:
     return mujoco.__version__
 
 
-def mjcf(scene, integrator: str = "RK4") -> str:
-    """MJCF for the scene's arm (zero torque policy; joint damping = scene damping)."""
+def mjcf(scene) -> str:
+    """MJCF for the scene's bare arm: its links, step and gravity, no effects (spec_of adds
+    them)."""
     (l1, l2), (m1, m2), (r1, r2), (i1, i2) = (scene.link_lengths, scene.link_masses,
                                               scene.com_distances, scene.com_inertias)
-    damping = scene.damping if isinstance(scene.damping, float) else 0.0
 
     def link(name, length, mass, com, inertia, child=""):
-        return (f'<body name="{name}"><joint name="{name}_joint" type="hinge" axis="0 0 1" '
-                f'damping="{damping!r}"/>'
+        return (f'<body name="{name}"><joint name="{name}_joint" type="hinge" axis="0 0 1"/>'
                 f'<geom type="capsule" fromto="0 0 0 {length!r} 0 0" size="0.02" contype="0" '
                 f'conaffinity="0"/>'
                 f'<inertial pos="{com!r} 0 0" mass="{mass!r}" '
@@ -73,7 +71,7 @@ def mjcf(scene, integrator: str = "RK4") -> str:
     inner = link("link2", l2, m2, r2, i2).replace('<body name="link2"',
                                                    f'<body name="link2" pos="{l1!r} 0 0"', 1)
     return (f'<mujoco model="arm_sim_ros"><option timestep="{scene.step_size!r}" '
-            f'integrator="{integrator}" gravity="0 {-scene.gravity!r} 0"/>'
+            f'gravity="0 {-scene.gravity!r} 0"/>'
             f'<worldbody>{link("link1", l1, m1, r1, i1, inner)}</worldbody></mujoco>')
 
 
@@ -105,11 +103,12 @@ def check(scene) -> list[str]:
 
 
 def spec_of(scene):
-    """An MjSpec of the scene with its effects (see the module's table) and its ctrl."""
+    """An MjSpec of the scene with its effects (see the module's table) and its ctrl
+    (mujoco_model sets the integrator)."""
     import mujoco
 
     check(scene)
-    spec = mujoco.MjSpec.from_string(mjcf(scene.replace(damping=0.0), "RK4"))
+    spec = mujoco.MjSpec.from_string(mjcf(scene))
     spec.compiler.degree = False          # springref, range in radians (MJCF: degrees)
     joints = [spec.joint(name) for name in JOINTS]
     damping = scene.damping if isinstance(scene.damping, tuple) else (scene.damping,) * 2
@@ -120,8 +119,7 @@ def spec_of(scene):
         joint.damping = [damping[i], 0.0, 0.0]            # (linear, quadratic, cubic)
         joint.stiffness = [springs["stiffness"][i], 0.0, 0.0]
         joint.springref = springs["rest_positions"][i]
-        if motors is not None:
-            joint.armature = motors.gear_ratio[i] ** 2 * motors.rotor_inertia[i]
+        joint.armature = scene.arm.armature[i]          # the motors' N^2 J, else 0
         if scene.friction is not None:
             joint.frictionloss = scene.friction["coulomb"][i]
         limits = scene.joint_limits
@@ -146,15 +144,9 @@ def spec_of(scene):
 
 
 def joint_inertia(scene) -> tuple[float, float]:
-    """Each joint's inertia 1/(M⁻¹)ᵢᵢ at the initial pose (armature included)."""
-    arm = scene.arm
-    if scene.motors is not None:
-        n, j = Motors(**scene.motors).gear_ratio, Motors(**scene.motors).rotor_inertia
-        extra = (n[0] ** 2 * j[0], n[1] ** 2 * j[1])
-    else:
-        extra = (0.0, 0.0)
-    m11, m12, m22 = arm_model.mass_matrix(arm, scene.initial_positions)
-    m11, m22 = m11 + extra[0], m22 + extra[1]
+    """Each joint's inertia 1/(M⁻¹)ᵢᵢ at the initial pose (scene.arm: payload and the
+    motors' armature included)."""
+    m11, m12, m22 = arm_model.mass_matrix(scene.arm, scene.initial_positions)
     det = m11 * m22 - m12 * m12
     return det / m22, det / m11
 
@@ -253,12 +245,3 @@ class Runner:
             mujoco.set_mju_user_warning(told)
         return kept + [(float("inf"),) * 4] * (total // every + 1 - len(kept))
 
-
-def fastest(run, repeat: int) -> float:
-    """Wall seconds of the fastest of `repeat` calls of run() (the benchmarks' timing)."""
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        run()
-        best = min(best, time.perf_counter() - start)
-    return best

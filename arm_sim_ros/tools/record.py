@@ -197,11 +197,6 @@ def offer_from_dds(qos):
         lease=duration(liveliness, "lease_duration"))
 
 
-# Set by SIGINT, SIGTERM or SIGHUP (used as a context manager): the loop stops, drains and
-# closes the bag; a second signal raises KeyboardInterrupt, and the bag is still closed.
-StopRequest = StopOnSignals
-
-
 def record(path, topics: dict[str, str], participant, duration: float | None = None,
            stop=None, report=None) -> dict[str, int]:
     """Record until `stop.requested` or `duration` wall seconds; returns messages per topic.
@@ -211,7 +206,7 @@ def record(path, topics: dict[str, str], participant, duration: float | None = N
     recorder = TopicRecorder(participant, topics)
     with BagWriter(path, start_ns=time.time_ns()) as writer:
         recorder.writer = writer
-        recorder.run(stop or StopRequest(), duration, report)
+        recorder.run(stop or StopOnSignals(), duration, report)
         return dict(writer.counts)
 
 
@@ -235,7 +230,9 @@ def cmd_record(args) -> int:
     def report(line):
         print(line, file=sys.stderr, flush=True)
 
-    with StopRequest() as stop:
+    # SIGINT, SIGTERM or SIGHUP: the loop stops, drains and closes the bag; a second signal
+    # raises KeyboardInterrupt, and the bag is still closed.
+    with StopOnSignals() as stop:
         report(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)")
         counts = record(args.dir, topics, participant, args.duration, stop, report)
     summary = ", ".join(f"{topic} {n}" for topic, n in counts.items()) or "no messages"

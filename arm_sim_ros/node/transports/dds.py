@@ -25,25 +25,26 @@ from ..parameters import resolve_parameters
 from ..ros_args import remap_name
 from ..schedule import TickSchedule
 from .dds_graph import NameWatch
-from .dds_clock import CLOCK_TOPIC, Clock, clock_message, clock_qos
-from .dds_services import DdsServices   # issue 15.3: parameter services, ~/reset
+from .dds_services import DdsServices
 
 LOCKSTEP_WAIT = 0.01   # wall seconds a lockstep node waits for a command before serving again
 
 
+def _stamp(stamp_ns: int) -> msg.Time:
+    return msg.Time(*split_stamp(stamp_ns))
+
+
 def to_joint_state(data: JointStateData) -> msg.JointState:
-    sec, nanosec = split_stamp(data.stamp_ns)
-    return msg.JointState(header=msg.Header(stamp=msg.Time(sec, nanosec), frame_id=data.frame_id),
+    return msg.JointState(header=msg.Header(stamp=_stamp(data.stamp_ns), frame_id=data.frame_id),
                           name=list(data.name), position=data.position, velocity=data.velocity,
                           effort=data.effort)
 
 
 def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
-    sec, nanosec = split_stamp(data.stamp_ns)
     status = msg.DiagnosticStatus(level=data.level, name=data.name, message=data.message,
                                   hardware_id=data.hardware_id,
                                   values=[msg.KeyValue(k, v) for k, v in data.values])
-    return msg.DiagnosticArray(header=msg.Header(stamp=msg.Time(sec, nanosec)), status=[status])
+    return msg.DiagnosticArray(header=msg.Header(stamp=_stamp(data.stamp_ns)), status=[status])
 
 
 class DdsArmSimNode:
@@ -63,9 +64,8 @@ class DdsArmSimNode:
         values = node_config.values
         self.joint_state_writer = self._writer(topic(values["joint_states_topic"]), msg.JointState)
         self.diagnostics_writer = self._writer(topic(DIAGNOSTICS_TOPIC), msg.DiagnosticArray)
-        self.clock_writer = DataWriter(self.participant,
-                                       Topic(self.participant, topic(CLOCK_TOPIC), Clock),
-                                       qos=clock_qos())
+        # /clock at the ROS default QoS: it matches rclpy's best-effort subscription too
+        self.clock_writer = self._writer(topic("/clock"), msg.Clock)
         self.command_reader = self._reader(topic(COMMAND_TOPIC), msg.Float64MultiArray)
         self.joint_command_reader = self._reader(topic(values["joint_commands_topic"]),
                                                  msg.JointState)
@@ -73,14 +73,13 @@ class DdsArmSimNode:
         for reader in (self.command_reader, self.joint_command_reader):
             self._command_ready.attach(ReadCondition(
                 reader, SampleState.Any | ViewState.Any | InstanceState.Any))
-        # --- issue 15.3: rcl_interfaces parameter services, ~/reset, /parameter_events ---
+        # rcl_interfaces parameter services, ~/reset, /parameter_events
         self.services = DdsServices(self.participant, name, namespace, self.log,
                                     resolve=self.resolve)
-        # --- end issue 15.3 ---
         self._announce()
         self.name_watch = NameWatch(self.participant, namespace, name, self.log)
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
-        self.services.attach(self.core)   # issue 15.3
+        self.services.attach(self.core)
 
     def _reader(self, topic_name: str, message_type) -> DataReader:
         return DataReader(self.participant, Topic(self.participant, topic_name, message_type),
@@ -100,10 +99,10 @@ class DdsArmSimNode:
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
             reader_gid_seq=[msg.gid(self.command_reader), msg.gid(self.joint_command_reader)]
-            + [msg.gid(r) for r in self.services.readers],   # issue 15.3: service requests
+            + [msg.gid(r) for r in self.services.readers],   # service requests
             writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer),
                             msg.gid(self.clock_writer)]
-            + [msg.gid(w) for w in self.services.writers])   # issue 15.3: replies, events
+            + [msg.gid(w) for w in self.services.writers])   # replies, parameter events
         self.discovery_writer.write(msg.ParticipantEntitiesInfo(
             gid=msg.gid(self.participant), node_entities_info_seq=[node]))
 
@@ -132,7 +131,7 @@ class DdsArmSimNode:
         """The timer callback: take commands, step, publish joint_states (and /clock); in
         lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
-        self.services.poll()   # issue 15.3: answer service requests between ticks
+        self.services.poll()   # answer service requests between ticks
         data = self.core.tick(wall_now)
         if data is not None:
             self._publish(data)
@@ -141,7 +140,7 @@ class DdsArmSimNode:
     def _publish(self, data: JointStateData) -> None:
         self.joint_state_writer.write(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
-            self.clock_writer.write(clock_message(data.stamp_ns))
+            self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
 
     def publish_diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         data = self.core.diagnostics(wall_now)
@@ -164,16 +163,13 @@ class DdsArmSimNode:
             if self.core.config.values["lockstep"]:    # commands tick: wait for them
                 self.services.poll()
                 self.take_commands(timeout=LOCKSTEP_WAIT)
-                if now >= next_status:
-                    self._status(now, on_status)
-                    next_status = now + 1.0
-                continue
-            if schedule.wait(now) > 0:
-                self.services.serve_for(schedule.wait(now))   # issue 15.3: sleep, serving
-                now = self.wall_clock()
-            self.tick(now)
-            # issue 15.3: a parameter set may change the period
-            schedule.ticked(now, self.core.config.wall_period)
+            else:
+                if schedule.wait(now) > 0:
+                    self.services.serve_for(schedule.wait(now))   # sleep, serving
+                    now = self.wall_clock()
+                self.tick(now)
+                # the period now: a parameter set may have changed it
+                schedule.ticked(now, self.core.config.wall_period)
             if now >= next_status:
                 self._status(now, on_status)
                 next_status = now + 1.0
@@ -190,7 +186,7 @@ class DdsArmSimNode:
         """Finish telemetry and leave the DDS graph (cyclonedds deletes an entity when its
         last Python reference goes)."""
         self.core.finish()
-        self.services.close()   # issue 15.3
+        self.services.close()
         self._command_ready = self.command_reader = self.discovery_writer = None
         self.joint_command_reader = self.clock_writer = self.name_watch = None
         self.joint_state_writer = self.diagnostics_writer = self.participant = None

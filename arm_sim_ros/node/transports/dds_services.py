@@ -32,7 +32,7 @@ from cyclonedds.util import duration
 from ...interface import split_stamp
 from .. import messages as msg
 from .. import parameter_services as ps
-from ..ros_args import full_node_name, remap_name
+from ..ros_args import full_node_name
 from ..wire_errors import check_topic_name
 from . import dds_service_types as t
 
@@ -144,12 +144,11 @@ class DdsServices:
     Create before announcing the node (its endpoints belong in ros_discovery_info), `attach`
     the core, then `poll()` from the loop or `serve_for(seconds)` instead of sleeping."""
 
-    def __init__(self, participant, name: str, namespace: str = "/", log=None,
-                 clock_ns=time.time_ns, resolve=None):
+    def __init__(self, participant, name: str, namespace: str, log, resolve,
+                 clock_ns=time.time_ns):
         """`resolve(ros_name)`: a service or topic name expanded and remapped as rcl does
         (`~/reset` is `/<namespace>/<name>/reset` unless a `-r` rule says otherwise)."""
         self.node = full_node_name(name, namespace)
-        resolve = resolve or (lambda ros_name: remap_name(ros_name, name, namespace))
         self.log, self.clock_ns = log, clock_ns
         self.core = self.parameters = None
         self.events_writer = DataWriter(

@@ -22,8 +22,9 @@ from std_srvs.srv import Trigger
 from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
-from ..parameters import PARAMETERS, SPECS, ParameterRefused, resolve_parameters, scene_defaults
-from ..schedule import CATCH_UP, TickSchedule
+from ..parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused, resolve_parameters,
+                          scene_defaults)
+from ..schedule import TickSchedule
 
 
 def _stamp(stamp_ns: int) -> Time:
@@ -55,14 +56,13 @@ class ArmSimNode(Node):
     def __init__(self, wall_clock=time.monotonic, recorder=None, status=None, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         self._status = status
-        # The scene and the URDF first: every other default derives from them.
-        first = ("scene", "robot_description")
+        # The scene and the URDF first (read-only): every other default derives from them.
         defaults = scene_defaults(*(self.declare_parameter(
             name, SPECS[name].default,
             ParameterDescriptor(description=SPECS[name].description, read_only=True)).value
-            for name in first))
+            for name in READ_ONLY))
         for spec in PARAMETERS:
-            if spec.name not in first:
+            if spec.name not in READ_ONLY:
                 # dynamic typing: `-p publish_rate:=100` (an integer) is still a rate; an
                 # effect's key the scene does not name is declared without a value (NOT_SET).
                 self.declare_parameter(spec.name, defaults[spec.name], ParameterDescriptor(
@@ -100,14 +100,10 @@ class ArmSimNode(Node):
             self._publish(data)
 
     def on_timer(self) -> None:
-        """The tick timer: every tick due by the schedule (schedule.py), so a late callback
-        (each spin costs Python time) still keeps real_time_factor; at most CATCH_UP s of
-        ticks per callback, so commands and services are served between."""
-        now = started = self.core.wall_clock()
-        while self.schedule.wait(now) <= 0 and now - started <= CATCH_UP:
-            self.on_tick()
-            self.schedule.ticked(now, self.core.config.wall_period)
-            now = self.core.wall_clock()
+        """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
+        callback, as each spin costs Python time, still keeps real_time_factor); nothing in
+        lockstep, where the commands tick."""
+        self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
         data = self.core.tick()
@@ -141,7 +137,7 @@ class ArmSimNode(Node):
         except ParameterRefused as refusal:
             self.get_logger().warning(str(refusal))
             return SetParametersResult(successful=False, reason=str(refusal))
-        if {"publish_rate", "real_time_factor", "step_size"} & set(changed):
+        if {"publish_rate", "real_time_factor"} & set(changed):      # the wall period
             self.destroy_timer(self.tick_timer)
             self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer)
         return SetParametersResult(successful=True)

@@ -22,8 +22,6 @@ from ..model import ParameterError
 from ..stability import worst_stiffness
 from .base import Channel, Effect, Parameter
 
-FIXED = ("stuck", "lower", "upper")
-
 
 class JointLimits(Effect):
     name = "joint_limits"
@@ -40,7 +38,7 @@ class JointLimits(Effect):
     )
     hard = True
 
-    def __init__(self, lower, upper, **_):
+    def __init__(self, lower, upper):
         self.lower, self.upper = tuple(lower), tuple(upper)
         for i, (lo, hi) in enumerate(zip(self.lower, self.upper)):
             if not lo < hi:

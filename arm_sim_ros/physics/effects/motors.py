@@ -78,27 +78,27 @@ class Motors(Effect):
         return out
 
     def terms(self) -> list[str]:
+        return self.winding_terms(None)
+
+    def mode_terms(self, mode) -> list[str]:
+        return self.winding_terms(mode if self.switching else None)
+
+    def winding_terms(self, mode) -> list[str]:
+        """The drivers' voltages v, the windings' di/dt and the joint torques t: the voltage
+        clamp switched in `mode` (a switching clamp), else written out (None)."""
         if not self.windings:
             return []
         lines = []
-        for j in (1, 2):
-            volts = f"DRIVE{j} * t{j}"
-            if self.voltage_limit is not None:
-                volts = f"MIN(MAX({volts}, -VLIM{j}), VLIM{j})"
-            lines += [f"v{j} = {volts}",
-                      f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
-                      f"t{j} = KN{j} * i{j}"]
-        return lines
-
-    def mode_terms(self, mode) -> list[str]:
-        if not self.switching:
-            return self.terms()
-        lines = []
         for i in (0, 1):
             j = i + 1
-            lines += [f"va{j} = DRIVE{j} * t{j}",
-                      *clamp_lines(f"va{j}", f"v{j}", f"VLIM{j}", mode[4][VOLTAGE + i]),
-                      f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
+            if mode is not None:
+                lines += [f"va{j} = DRIVE{j} * t{j}",
+                          *clamp_lines(f"va{j}", f"v{j}", f"VLIM{j}", mode[4][VOLTAGE + i])]
+            elif self.voltage_limit is not None:
+                lines.append(f"v{j} = MIN(MAX(DRIVE{j} * t{j}, -VLIM{j}), VLIM{j})")
+            else:
+                lines.append(f"v{j} = DRIVE{j} * t{j}")
+            lines += [f"di{j} = (v{j} - RES{j} * i{j} - KN{j} * u{j}) * INV_IND{j}",
                       f"t{j} = KN{j} * i{j}"]
         return lines
 
