@@ -1,6 +1,9 @@
-"""µs per step on `release` with the error estimate (accuracy.py: estimate only, and at the
-default tolerance) versus the plain planned step with no check, and the price list: time vs achieved energy drift for a sweep of tolerances on a
-100 rad/s spin (gravity off, elbow bent 0.5 rad, 5 s). Prints tables; never pass/fail.
+"""What the default tolerance costs against tolerance 0 on every preset and on long hard runs
+(the 60 s undamped bounce between stiff compliant stops, geared_arm over 120 s); µs per
+step on `release` with the error estimate (accuracy.py: estimate only, and at the default
+tolerance) versus the plain planned step with no check; and the price list: time vs
+achieved energy drift for a sweep of tolerances on a 100 rad/s spin (gravity off, elbow
+bent 0.5 rad, 5 s). Prints tables; never pass/fail.
 
     .venv/bin/python benchmarks/bench_tolerance.py
 """
@@ -15,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchma
 from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
 
 from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE  # noqa: E402
-from arm_sim_ros.physics.scene import Scene, load_scene  # noqa: E402
+from arm_sim_ros.physics.scene import Scene, load_scene, preset_names  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 
 
@@ -34,7 +37,38 @@ def unchecked(sim) -> None:
     sim.accuracy.due = float("inf")
 
 
+def cpu_run(scene, duration) -> tuple[float, Simulator]:
+    """Process seconds for `duration` simulated seconds of `scene`, and the simulator."""
+    sim = Simulator(scene)
+    start = time.process_time()
+    sim.run(duration)
+    return time.process_time() - start, sim
+
+
+def against_tolerance_0(cases) -> None:
+    """Each case at tolerance 0 and at the default, side by side in one run."""
+    print(f"  {'scene':34s} {'s':>5s} {'CPU tol 0':>10s} {'CPU default':>12s} {'ratio':>6s} "
+          f"{'tol 0 meets it':>15s} {'accum. tol 0':>13s} {'accum. default':>15s}")
+    for label, scene, duration in cases:
+        plain_cpu, plain = cpu_run(scene.replace(tolerance=0.0), duration)
+        cpu, sim = cpu_run(scene.replace(tolerance=DEFAULT_TOLERANCE), duration)
+        meets = plain.accumulated_error <= DEFAULT_TOLERANCE * duration
+        print(f"  {label:34s} {duration:5g} {plain_cpu:10.3f} {cpu:12.3f} "
+              f"{cpu / max(plain_cpu, 1e-9):6.2f} {'yes' if meets else 'no':>15s} "
+              f"{plain.accumulated_error:13.3g} {sim.accumulated_error:15.3g}")
+
+
 def main() -> None:
+    print(f"the default tolerance {DEFAULT_TOLERANCE:g} against tolerance 0 (CPU seconds, "
+          "process time; 'tol 0 meets it': its accumulated estimate is within the tolerance "
+          "x duration)")
+    bounce = load_scene("compliant_limit").replace(
+        **{"joint_limits.stiffness": 1e7, "joint_limits.damping": 0.0}, step_size=0.05)
+    against_tolerance_0([(name, load_scene(name), max(2.0, load_scene(name).duration))
+                         for name in preset_names()]
+                        + [("bounce k = 1e7, h = 0.05, undamped", bounce, 60.0),
+                           ("geared_arm", load_scene("geared_arm"), 120.0)])
+    print()
     print("release, h = 0.01, 2 s (the explainer's figure: no sub-steps needed), µs per step,"
           " best of 40 interleaved runs")
     labels, sims = [], []

@@ -17,7 +17,7 @@ from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE
 from arm_sim_ros.physics.scene import Scene, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 
-FINE = 64   # reference sub-division for switching scenes
+FINE = 16   # reference sub-division for switching scenes (and a tolerance of 1e-11)
 
 
 def spin(h, **kw):
@@ -36,7 +36,8 @@ def reference(scene, sim, steps):
                              list(sim.state), method="DOP853", t_eval=times, rtol=1e-13,
                              atol=1e-13)
         return np.asarray(solution.y).T
-    fine, states = Simulator(scene.replace(step_size=h / FINE, tolerance=0.0)), [sim.state]
+    fine = Simulator(scene.replace(step_size=h / FINE, tolerance=1e-11, max_substeps=20000))
+    states = [sim.state]
     for _ in range(steps):
         for _ in range(FINE):
             fine.step()
@@ -65,7 +66,6 @@ HOLDS = {
     "payload_release": (load_scene("payload_release"), 2.0),
     "wrong_payload_model": (load_scene("wrong_payload_model"), 2.0),
     "geared_release": (load_scene("geared_release"), 2.0),
-    "motor_windings_hold": (load_scene("motor_windings_hold"), 2.0),
     "spin_1ms": (spin(0.001), 1.0),
     "spin_10ms": (spin(0.01), 1.0),
     "spin_1ms_estimate_only": (spin(0.001, tolerance=0.0), 1.0),
@@ -77,8 +77,6 @@ HOLDS = {
     # switching scenes (events.py): smooth steps on the schedule, every step starting with a
     # compliant limit engaged estimated piece by piece, and, when steps are not split,
     # every step with a located switch
-    "stick_slip": (load_scene("stick_slip"), 2.0),
-    "compliant_limit": (load_scene("compliant_limit"), 2.0),
     "effort_limited_hold": (load_scene("effort_limited_hold"), 2.0),
 }
 
@@ -92,26 +90,21 @@ def test_the_accumulated_estimate_is_within_a_factor_of_10_of_the_true_error(nam
 
 
 def test_where_it_does_not_hold_it_is_known_and_on_which_side():
-    # The frozen gravity torque pumps a flailing arm (12 rad/s by 2 s): estimate only, the
-    # sum is pessimistic, just over (11x); once the tolerance splits its steps (after ~1 s), errors made
-    # before, which grow along the motion, dominate and the sum underestimates (0.02x).
-    r, _ = ratio(load_scene("moving_frozen_gravity").replace(tolerance=0.0), 2.0)
-    assert 10.0 < r < 20.0
-    r, _ = ratio(load_scene("moving_frozen_gravity"), 2.0)
-    assert r < 0.1
-    # dopri5 reports its 4th-order companion's error for its 5th-order solution: safe,
-    # pessimistic (11x on the release).
-    r, _ = ratio(load_scene("release").replace(integrator="dopri5"), 2.0)
-    assert 10.0 < r < 20.0
-    # A hard limit's impulse maps the arrival error into a velocity jump, and the bounce's
-    # timing into position: the sum of local errors misses it (0.035x).
-    r, _ = ratio(load_scene("limit_impact"), 2.0)
-    assert r < 0.1
-    # geared_arm's stiff windings (3 planned sub-steps, friction, limits): a switching
-    # step's pieces are summed sub-step by sub-step, where a decaying mode's early errors
-    # would have decayed by the step's end: pessimistic (23x), the safe side.
-    r, _ = ratio(load_scene("geared_arm"), 2.0)
-    assert 10.0 < r < 50.0
+    """Open (issue 22, part 4): a sum of local errors is not a global error where the
+    motion contracts errors (an attracting hold, a joint that sticks) or maps them through
+    a contact's timing (the velocity jumps while the contact lasts). Measured with the
+    controller that follows the error both ways; what remains to be built is an error
+    propagated along the motion."""
+    def r(scene):
+        return ratio(scene, 2.0)[0]
+    assert 10.0 < r(load_scene("motor_windings_hold")) < 100.0     # attracting hold: over
+    assert 10.0 < r(load_scene("stick_slip")) < 100.0               # sticking wipes errors
+    assert r(load_scene("compliant_limit")) < 0.1                   # contact timing: under
+    assert r(load_scene("limit_impact")) < 0.1                      # impact timing: under
+    assert 10.0 < r(load_scene("moving_frozen_gravity").replace(tolerance=0.0)) < 20.0
+    assert r(load_scene("moving_frozen_gravity")) < 0.1            # errors grow: under
+    # dopri5 reports its 4th-order companion's error for its 5th-order solution: over
+    assert 10.0 < r(load_scene("release").replace(integrator="dopri5")) < 20.0
 
 
 @pytest.mark.parametrize("h", [0.001, 0.01])

@@ -211,7 +211,7 @@ class ArmSimCore:
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
                                                          self.refused_commands, self.late_ticks)
-        level, message = health(self.held, new_refused, new_late)
+        level, message = health(self.held, new_refused, new_late, self.sim.books_fault)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
                                    {name: getattr(self, name) for name in COUNTERS})

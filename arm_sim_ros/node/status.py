@@ -25,10 +25,13 @@ class Interval:
         return closed
 
 
-def health(held: bool, new_refused: int, new_late: int) -> tuple[int, str]:
-    """(diagnostic level, message) over the interval since the previous status."""
+def health(held: bool, new_refused: int, new_late: int, books=None) -> tuple[int, str]:
+    """(diagnostic level, message) over the interval since the previous status; `books`:
+    why the energy books do not close (physics/guard.py), an error until reset."""
     if held:
         return ERROR, "integration not finite: holding the last finite state"
+    if books:
+        return ERROR, books
     if new_refused or new_late:
         return WARN, f"{new_refused} refused commands, {new_late} late ticks in the last interval"
     return OK, "running"

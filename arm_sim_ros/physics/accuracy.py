@@ -1,52 +1,41 @@
-"""How far each step is from the exact flow, and the equal sub-steps that keep it under a
-tolerance.
+"""How far each step is from the exact flow, and the sub-steps that keep it under a
+tolerance: an error estimate on a schedule and a step-size controller that moves both ways.
 
 Estimator (measured: benchmarks/bench_tolerance.py, test/test_error_estimate.py): Richardson
 step doubling on a schedule. A check takes the step (n equal sub-steps, bit for bit the
 plain step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1) is the step's
 local error at its end (p = the tableau's order). Measured at the end, not as n x the
-first sub-step: a stiff mode the stability plan's sub-steps damp out within the step
-(damping 500 at h = 50 ms: 377 sub-steps, true error 3e-9) made the first-sub-step
-estimate 1e9 times too large and split such steps 4-10x more for no gain. The estimate is
-carried to the steps until the next check; the books are closed lazily at each check
-(carried steps at the mean of the checks either side; until then at half the latest, the
-least that mean can be, so the sum never goes down), so an unchecked step is the
-compiled step called by the simulator directly, nothing else.
+first sub-step: a stiff mode the stability plan's sub-steps damp out within the step has
+decayed by then. The estimate is carried to the steps until the next check, so an
+unchecked step is the compiled step called by the simulator directly, nothing else.
 
 Schedule: every CHECK_EVERY-th step; every RELAXED_EVERY-th while the estimate is under
-RELAXED x the tolerance; a check costs 2 steps' evaluations. Release, h = 10 ms: plain
-4.0 us/step, estimate only +18 %, default tolerance +10 % (was +23 % through a wrapper).
-Sparser checks cost honesty: at 64 steps the sums fell to 0.11-0.24x of the true error.
+RELAXED x the tolerance at the planned count; a check costs 2 steps' evaluations.
+Switching scenes (events.py): every step in which a switch is located, and every step
+that starts with a compliant limit engaged, is checked; each smooth piece up to a switch
+is doubled and the pieces' errors are summed.
 
-Switching scenes (events.py): the same doubling, sub-step by sub-step: each smooth piece
-up to a located switch is doubled and the pieces' errors summed. Steps without a switch
-follow the schedule; a step that starts with a compliant limit engaged is always
-estimated, and so is a step with a located switch when steps are not split (the switch is
-seen in the plain step's fast path, events.py; split steps are estimated on the schedule):
-they are short and where the error is made. A count the tolerance raises there applies
-from the next step (the step's switches are already booked).
+Controller: the sub-step size h / n follows the error both ways, as a PI step-size
+controller does (Gustafsson; Hairer & Wanner II.4, scipy's RK45): the local error of a
+step of n sub-steps goes as n^-p, so with r = scaled error / (SAFETY x tolerance x h),
+n' = n r^(KI/p) (r / r_prev)^(KP/p), growth of the sub-step bounded by MAX_GROWTH per check
+and its shrink by MAX_SHRINK; a check that misses the tolerance (r > 1 / SAFETY) is taken
+again at the count it asks for. Tick boundaries stay exact: a step is always n equal
+sub-steps. The stability plan's count is a floor, never a ratchet; `max_substeps` is the
+ceiling: past it the step is taken at the cap and the run says once what error it reached.
+On switching scenes the sub-steps of a compliant contact and of free motion are
+controlled apart (a contact needs fine steps, the flight between contacts does not).
 
 `error_estimate` is the latest check's local error (max over q, qd of |e|, rad and rad/s);
-`accumulated_error` sums them over the steps: a bound on the global error while errors do
-not grow along the motion (not for chaotic motion, nor through a hard impact's impulse).
+`accumulated_error` sums them over the steps (carried steps at the mean of the checks
+either side; until then at half the latest, so the sum never goes down).
 
-Tolerance: a check whose scaled error max(|e_q|, |e_qd| / (1 + |qd|)) exceeds tolerance x h
-(per simulated second, so the bound on the drift does not depend on h; angles unscaled:
-they are unwrapped, their size says nothing) re-measures with the fewest equal sub-steps
-n' = ceil(n (err / (SAFETY tolerance h))^(1/p)) until it passes, takes the step that way and
-keeps the count until reset (the error of a spinning arm peaks each swing of the elbow).
-
-Default (DEFAULT_TOLERANCE = 5e-5 per s), measured: a 100 rad/s spin (gravity off, elbow
-0.5 rad) needs <= 1e-4 for relative energy drift < 1e-6 over 5 s at h = 10 ms (1e-4: 6.5e-7;
-5e-5: 2.8e-7; at 1 ms 6e-9); explainer figures are left bit for bit down to 3e-5 (1e-5
-splits release at h = 5 ms): 5e-5 sits between with ~2-4x margin either side. Their steps
-are accurate on the schedule, not at every instant: checked every step, release at 10 ms
-peaks at 1.4e-3 per s for a few steps as the elbow whips, which no check falls on; a
-tolerance is a budget for sustained error, sampled. It also asks for what it says
-elsewhere: mildly stiff steps the plan leaves under-resolved (springs k = 1e6 at 1 ms: true
-error 24 rad -> 4e-5 at 171 sub-steps; damping 50 kicked: 1.7e-4 -> 1.9e-7 at 41 vs 8),
-springs_oscillation and stick_slip from the start (2 sub-steps), payload_release from 0.6 s,
-moving_frozen_gravity from 1.8 s, release from 3 s. 0 turns it off (estimate only).
+Tolerance: the scaled error max(|e_q|, |e_qd| / (1 + |qd|)) per step is held under
+tolerance x h (per simulated second, so the bound on the drift does not depend on h;
+angles unscaled: they are unwrapped, their size says nothing). 0 turns the controller off
+(estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s spin needs <= 1e-4
+for a relative energy drift < 1e-6 over 5 s at h = 10 ms, and the explainer's figures are
+left bit for bit down to 3e-5.
 """
 from __future__ import annotations
 
@@ -55,13 +44,55 @@ from math import ceil, isfinite
 from . import stability
 
 CHECK_EVERY = 16          # steps between doubling checks (a check: 2 steps' evaluations)
-RELAXED_EVERY = 32        # ... while the estimate is under RELAXED x the tolerance (and
-                          # the tolerance does not split steps: a check is 2n sub-steps)
-RELAXED = 1.0 / 16.0      # (a step twice as long would still meet it: 2^p = 16 for RK4)
-SAFETY = 0.5              # new counts aim at half the tolerance: fewer retaken steps
-MAX_SUBSTEPS = 10_000     # the most a tolerance may ask of one step
+RELAXED_EVERY = 32        # ... while the estimate is under RELAXED x the tolerance at the
+RELAXED = 1.0 / 16.0      # planned count (a step twice as long would still meet it: 2^4)
+SAFETY = 0.5              # counts aim at half the tolerance: fewer retaken steps
+KI, KP = 0.7, 0.4         # PI gains on ln(error) (Hairer & Wanner's 0.7/k, 0.4/k)
+MAX_GROWTH = 2.0          # a sub-step grows at most 2x per check ...
+MAX_SHRINK = 10.0         # ... and shrinks at most 10x per retake
+KEEP = 0.9                # fewer sub-steps only when the controller asks for < 90 %
+DEFAULT_MAX_SUBSTEPS = 1000   # the tolerance's ceiling per step (scene key max_substeps)
+MAX_SUBSTEPS = stability.MAX_SUBSTEPS   # what a scene may set it to
 # Per simulated second, scaled error (see above); 0 = off (estimate only).
 DEFAULT_TOLERANCE = 5e-5
+
+
+def proposed(n: int, ratio: float, previous: float, order: int, floor: int, cap: int) -> int:
+    """The sub-steps the controller asks for after a step of n sub-steps measured at
+    `ratio` = scaled error / (SAFETY tolerance h) (`previous`: the check before)."""
+    if not isfinite(ratio):
+        return min(cap, max(floor, ceil(n * MAX_SHRINK)))
+    ratio, previous = max(ratio, 1e-12), max(previous, 1e-12)
+    factor = ratio ** (KI / order) * (ratio / previous) ** (KP / order)
+    wanted = n * min(MAX_SHRINK, max(1.0 / MAX_GROWTH, factor))
+    if wanted < n and wanted > KEEP * n:
+        return n
+    return max(floor, min(cap, ceil(wanted - 1e-9)))
+
+
+def retake(n: int, ratio: float, order: int, cap: int) -> int:
+    """The count a step that missed the tolerance is taken again at: where its error
+    (as n^-p) meets SAFETY x the tolerance, at least one more, at most the cap."""
+    wanted = n * min(MAX_SHRINK, ratio ** (1.0 / order)) if isfinite(ratio) else n * MAX_SHRINK
+    return min(cap, max(n + 1, ceil(wanted - 1e-9)))
+
+
+class Control:
+    """One sub-step count under the controller: its floor, its ceiling, its last ratio."""
+
+    def __init__(self, floor: int, cap: int):
+        self.floor, self.cap = floor, max(floor, cap)
+        self.n, self.previous = floor, 1.0
+
+    def ask(self, ratio: float, order: int) -> int:
+        """The count for the next steps after a step measured at `ratio`. At the floor, a
+        step that met the tolerance asks for nothing more (plain steps stay plain: the
+        explainer's figures bit for bit); above it the count follows the error both ways."""
+        wanted = proposed(self.n, ratio, self.previous, order, self.floor, self.cap)
+        self.previous = ratio if isfinite(ratio) else self.previous
+        if self.n <= self.floor and ratio * SAFETY <= 1.0:
+            return self.n
+        return wanted
 
 
 class Accuracy:
@@ -70,16 +101,16 @@ class Accuracy:
     the estimate is carried between checks, so the sums are counted when asked for."""
 
     def __init__(self, step, order: int, tolerance: float, width: int, substeps: int = 1,
-                 emit=None, clock=None, stepper=None):
+                 emit=None, clock=None, stepper=None, cap: int = DEFAULT_MAX_SUBSTEPS):
         self.step, self.order, self.tolerance, self.width = step, order, tolerance, width
         self.factor = 2.0 ** order / (2.0 ** order - 1.0)
         self.base = substeps          # the stability plan's count: never fewer
-        self.emit = emit              # emit(kind, message): a count above any before
+        self.cap = max(substeps, cap)  # the tolerance's ceiling
+        self.emit = emit              # emit(kind, message)
         self.clock = clock            # the simulator's step index (the step being taken)
         self.stepper = stepper        # events.Switching: it steps, pieces are estimated
         if stepper is not None:       # ... and a step with a switch or a contact always
             stepper.checked = self.check
-        self.most = substeps
         self.reset()
 
     def reset(self) -> None:
@@ -87,11 +118,18 @@ class Accuracy:
         self.since = self.due = 0     # step index of the latest check; of the next
         self.booked = 0.0             # Σ error_estimate over the steps before `since`
         self.booked_taken = 0         # sub-steps run in split steps before `since`
+        self.free = Control(self.base, self.cap)
+        self.contact = Control(0, self.cap)      # engaged pieces (switching stepper)
+        self.most = self.base         # the largest count said so far
+        self.capped = False           # said once: the tolerance was not met at the cap
         self.substeps = -1
         self.use(self.base)
+        if self.stepper is not None:
+            self.stepper.contact_substeps = 0
 
     def use(self, n: int) -> None:
         """Take n equal sub-steps from now on."""
+        self.free.n = n
         if n != self.substeps:
             self.substeps = n
             if self.stepper is not None:
@@ -140,66 +178,91 @@ class Accuracy:
             self.step, n)(f, y, h)
         return (full, *self.doubled(f, y, h, full, n))
 
-    def needed(self, n: int, scaled: float, h: float) -> int:
-        """Sub-steps for which a step measured at `scaled` with n sub-steps meets the
-        tolerance; never fewer than n: the count a run once needed is kept until reset
-        (the error of a spinning arm peaks for a few steps each swing of the elbow, and a
-        check between peaks must not undo what the peaks need)."""
-        limit = self.tolerance * h
-        if not isfinite(scaled) or scaled <= limit or not self.tolerance:
-            return n
-        return min(MAX_SUBSTEPS, ceil(n * (scaled / (SAFETY * limit)) ** (1.0 / self.order)))
+    def ratio(self, scaled: float, h: float) -> float:
+        return scaled / (SAFETY * self.tolerance * h)
 
     def check(self, f, y, h):
-        """The step, measured; too coarse for the tolerance: measured again at the count it
-        needs (until it passes) and taken that way."""
+        """The step, measured; a miss of the tolerance is taken again at the count the
+        controller asks for (until it passes or the cap is reached)."""
         index, n = self.clock(), self.substeps
         if self.stepper is not None:
             return self.switching(f, y, h, index, n)
         y1, error, scaled = self.measure(f, y, h, n)
-        wanted = self.needed(n, scaled, h)
-        first = scaled
-        while wanted > n:
-            n = wanted
-            y1, error, scaled = self.measure(f, y, h, n)
-            wanted = self.needed(n, scaled, h)
-        self.book(index, error, scaled, n, h, first)
+        first, wanted = scaled, n
+        if self.tolerance:
+            wanted = self.free.ask(self.ratio(scaled, h), self.order)
+            while scaled > self.tolerance * h and n < self.cap:      # a miss: retaken
+                n = self.free.n = retake(n, self.ratio(scaled, h), self.order, self.cap)
+                y1, error, scaled = self.measure(f, y, h, n)
+                wanted = self.free.ask(self.ratio(scaled, h), self.order)
+        self.book(index, error, scaled, n, h, first, wanted)
         return y1
 
     def switching(self, f, y, h, index, n):
         """A step of a switching scene: every sub-step (each smooth piece between located
-        switches) doubled, errors summed; a count the tolerance raises applies from the
-        next step on (this one's switches are already booked)."""
-        sums = [0.0, 0.0]
+        switches) doubled, errors summed, free flight and compliant contact apart; the
+        counts the controller asks for apply from the next step on (this one's switches
+        are already booked)."""
+        sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0]}    # error, scaled, pieces
+        stepper = self.stepper
 
         def piece(rhs, y0, dt, full):
             error, scaled = self.doubled(rhs, y0, dt, full)
-            sums[0] += error
-            sums[1] += scaled
+            part = sums[bool(stepper.mode[2] or stepper.mode[3])]
+            part[0] += error
+            part[1] += scaled
+            part[2] += 1
 
-        y1 = self.stepper.advance(f, y, h, piece)
-        self.book(index, sums[0], sums[1], n, h, sums[1], self.needed(n, sums[1], h))
+        y1 = stepper.advance(f, y, h, piece)
+        error = sums[False][0] + sums[True][0]
+        scaled = sums[False][1] + sums[True][1]
+        wanted = n
+        if self.tolerance:
+            if sums[False][2]:
+                wanted = self.free.ask(self.ratio(sums[False][1], h), self.order)
+            if sums[True][2]:                # compliant contact: its own count
+                self.contact.floor = stepper.contact_floor(h)
+                self.contact.n = stepper.substeps_for(h, True)
+                stepper.contact_substeps = self.contact.ask(self.ratio(sums[True][1], h),
+                                                            self.order)
+                self.told(stepper.contact_substeps, sums[True][1], h, sums[True][1],
+                          " while a compliant limit is engaged")
+        self.book(index, error, scaled, n, h, scaled, wanted)
         return y1
 
-    def book(self, index, error, scaled, n, h, first, wanted=None):
+    def book(self, index, error, scaled, n, h, first, wanted):
         """Close the books up to step `index` (which took n sub-steps and made `error`) and
-        carry this estimate from it on."""
+        carry this estimate from it on (predicted at the new count)."""
         carried = index - self.since            # steps that carried the latest estimate
         # ... booked at the mean of the checks either side (the error between them moved)
         self.booked += 0.5 * (self.error_estimate + error) * carried + error
         self.booked_taken += (self.substeps * carried if self.substeps > 1 else 0) + (
             n if n > 1 else 0)
-        self.since, self.error_estimate = index + 1, error
-        wanted = n if wanted is None else wanted
+        self.since = index + 1
+        self.error_estimate = error * (n / wanted) ** self.order if wanted != n else error
         self.use(wanted)
-        relax = (wanted <= self.base and self.tolerance      # never while the tolerance splits
+        relax = (wanted <= self.base and self.tolerance
                  and scaled < RELAXED * self.tolerance * h)
         self.due = index + (RELAXED_EVERY if relax else CHECK_EVERY)
-        if wanted > self.most and self.emit is not None:
+        if self.tolerance:
+            self.told(wanted, first, h, scaled)
+
+    def told(self, wanted, first, h, reached=None, where="") -> None:
+        """Say a new highest count once it is, and once that the cap could not meet it."""
+        if self.emit is None:
+            return
+        if wanted >= self.cap and not self.capped and (reached is None or
+                                                       reached > self.tolerance * h):
+            self.capped = True
+            self.emit("substepping", f"tolerance {self.tolerance:g} not met: local error "
+                      f"{(reached if reached is not None else first) / h:.3g} per s (scaled) "
+                      f"at the cap of {self.cap} sub-steps per step (max_substeps); the run "
+                      "goes on at the cap")
+        elif wanted > self.most and wanted > 2 * max(1, self.most):
             self.most = wanted
-            self.emit("substepping", f"local error {first / h:.3g} per s (scaled) "
-                      f"exceeds tolerance {self.tolerance:g}: each {h:g} s step is taken "
-                      f"as {wanted} sub-steps")
+            self.emit("substepping", f"local error {first / h:.3g} per s (scaled) for "
+                      f"tolerance {self.tolerance:g} (aiming at half): each {h:g} s "
+                      f"step{where} is taken as {wanted} sub-steps")
 
 
 class Embedded:
@@ -256,7 +319,7 @@ class Unchecked:
 
 
 def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
-         clock=None, stepper=None, previous=None):
+         clock=None, stepper=None, previous=None, cap: int = DEFAULT_MAX_SUBSTEPS):
     """The error books, with the step they take (`step` as the stability plan's `substeps`
     equal sub-steps): the embedded pair's own estimate, or checked equal sub-steps (over the
     stability plan's) of a fixed-step method, switched at events by `stepper` if any.
@@ -270,7 +333,8 @@ def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
     elif substeps > stability.MAX_SUBSTEPS:   # the stability plan refuses: keep its refusal
         return Unchecked(stability.substepping(step, substeps), substeps)
     else:
-        books = Accuracy(step, tableau.order, tolerance, width, substeps, emit, clock, stepper)
+        books = Accuracy(step, tableau.order, tolerance, width, substeps, emit, clock, stepper,
+                         cap)
     if previous is not None:        # go on from here: the sums so far, a check at once
         books.carry(previous, clock())
     return books

@@ -70,6 +70,7 @@ class Switching:
         self.impact_at = (self.width + dynamics.channels.index("impact_loss")
                           if "impact_loss" in dynamics.channels else None)
         self.substeps, self.engaged_rate = substeps, 0.0
+        self.contact_substeps = 0         # the tolerance's count while engaged (accuracy.py)
         if self.limits is not None and not self.hard:
             # h |λ| of the engaged arm per unit step (the step size is the plan's business)
             ratio, _, _ = stability.bound(tableau, list(dynamics.active)
@@ -122,11 +123,13 @@ class Switching:
             mode = release(self, mode, which, y, lam[which])
         return mode
 
+    def contact_floor(self, h: float) -> int:   # resolves an engaged limit: ~12 a swing
+        return ceil(h * self.engaged_rate / CONTACT_RESOLUTION)
+
     def substeps_for(self, h: float, engaged: bool) -> int:
-        """The plan's sub-steps; while a compliant limit is engaged, enough to resolve it."""
-        if not engaged:
-            return self.substeps
-        return max(self.substeps, ceil(h * self.engaged_rate / CONTACT_RESOLUTION))
+        """The free count; engaged, the most of it, the contact floor and the tolerance's."""
+        return max(self.substeps, self.contact_floor(h), self.contact_substeps) if engaged \
+            else self.substeps
 
     # --- stepping ------------------------------------------------------------------------
 
@@ -149,7 +152,7 @@ class Switching:
                 return y1
         if piece is None and self.checked is not None and (self.substeps == 1 or engaged):
             return self.checked(f, y, h)     # a switch inside or a contact: estimate it
-        remaining, events, taken = h, 0, 0
+        start, remaining, events, taken = y, h, 0, 0
         while remaining > 1e-15 * h:
             mode = self.mode
             rhs, _, guard, kinds, _ = self.functions(mode)
@@ -163,6 +166,8 @@ class Switching:
                         piece(rhs, y, dt, y1)
                     y = y1
                     continue
+                if piece is None and self.checked is not None and not events:
+                    return self.checked(f, start, h)   # a switch inside: estimate the step
                 elapsed = h - remaining + k * dt          # from the step's start
                 if self.locate and events < MAX_EVENTS_PER_STEP:
                     t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed, piece)

@@ -12,7 +12,7 @@ from math import isfinite
 from pathlib import Path
 
 from .. import yaml_files
-from .accuracy import DEFAULT_TOLERANCE
+from .accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .effects import BUILDERS, MAPPING_EFFECTS, POLICIES, EffortLimits, JointLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
@@ -53,6 +53,7 @@ class Scene:
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
+    max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -80,6 +81,9 @@ class Scene:
         if not self.tolerance >= 0:
             raise SceneError(f"tolerance = {self.tolerance} must be >= 0 (local error per "
                              "simulated second; 0: estimate only, never split a step)")
+        if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
+            raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
+                             f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
         if not MIN_STEP_SIZE <= self.step_size <= MAX_DURATION:
             raise SceneError(f"step_size = {self.step_size} must be positive: from "
                              f"{MIN_STEP_SIZE:g} s (stamps count nanoseconds) to {MAX_DURATION:g} s")

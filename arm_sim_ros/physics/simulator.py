@@ -107,7 +107,8 @@ class Simulator:
             lambda: self.time, getattr(self, "switch_events", None))
         self.accuracy = accuracy.plan(   # the planned step, its error checked (accuracy.py)
             self._tableau, self._step, self.substeps, scene.tolerance, 4, self._emit,
-            lambda: self.steps, self.switching, getattr(self, "accuracy", None))
+            lambda: self.steps, self.switching, getattr(self, "accuracy", None),
+            int(scene.max_substeps))
 
     def reset(self) -> None:
         s = self.scene
@@ -123,6 +124,8 @@ class Simulator:
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
         self._sound = self.state     # the latest state the divergence check found sound
+        self.energy_in_play = guard.in_play(self, self.state)   # the most seen (guard.py)
+        self.books_fault = None      # why the energy books do not close, said once
         self.switch_events = self.switching.reset() if self.switching else Counter()  # by kind
         self.accuracy.reset()
 
@@ -208,6 +211,8 @@ class Simulator:
         why = guard.divergence(self, self.state)
         if why is None:
             self._sound = self.state
+            if guard.audit(self):              # books that do not close: said once
+                self._emit("fault", self.books_fault)
         else:                             # the step just counted is refused after all
             self.state, self.diverged = self._sound, why
             self._refuse(why, "the last sound state", self.steps - 1)

@@ -15,6 +15,9 @@ def scene_from_args(args) -> Scene:
         scene = scene_from_urdf(read_urdf_file(args.urdf), scene)
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
+    for key in ("tolerance", "max_substeps"):
+        if getattr(args, key, None) is not None:
+            scene = scene.replace(**{key: parse_value(key, getattr(args, key))})
     return scene.with_text_overrides(getattr(args, "set", None) or [])
 
 
@@ -33,6 +36,12 @@ def add_scene_arguments(parser) -> None:
                         help="take the arm from a planar 2R URDF: links, inertias, joint and "
                              "effort limits, damping, friction; --scene gives the rest")
     parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
+    parser.add_argument("--tolerance", metavar="TOL",
+                        help="local error per simulated second a step may make before it is "
+                             "split into sub-steps (0 = estimate only; default: the scene's)")
+    parser.add_argument("--max-substeps", dest="max_substeps", metavar="N",
+                        help="the most sub-steps the tolerance may ask of one step "
+                             "(default: the scene's, 1000)")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="override a scene key, e.g. gravity=0, constant_torque=1,0 or "
                              "springs.stiffness=20,5")

@@ -24,6 +24,10 @@ def usable_memory() -> int:
 
 def cmd_batch(args) -> int:
     scene = scene_from_args(args)
+    if args.tolerance is not None and scene.tolerance:
+        raise UsageError(f"--tolerance {args.tolerance}: a batch steps every arm by the same "
+                         "equal sub-steps (the stability plan's), so it cannot honour a "
+                         "tolerance; give --tolerance 0, or run one arm with `arm-sim run`")
     if args.count < 1 or not 1 <= args.threads <= MAX_THREADS:
         raise UsageError(f"--count must be at least 1 and --threads from 1 to {MAX_THREADS}")
     if args.seed < 0:

@@ -157,6 +157,11 @@ class Effect:
         """Energy it stores at configuration q and its extra states, counted in E."""
         return 0.0
 
+    def lowest_stored_energy(self, arm) -> float:
+        """A lower bound of stored_energy over every state (0: it stores none or >= 0):
+        energy above it can be set in motion, wherever the effect puts its zero."""
+        return 0.0
+
     def stiffness(self, arm) -> float:
         """The largest decay rate (1/s) it adds on the negative real axis, at any pose: what
         the sub-step planner keeps h times under the integrator's stability limit."""

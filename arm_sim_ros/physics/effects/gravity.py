@@ -25,3 +25,7 @@ class Gravity(Effect):
 
     def stored_energy(self, arm, q, extra) -> float:
         return model.potential_energy(arm, q, self.gravity)
+
+    def lowest_stored_energy(self, arm) -> float:
+        k1, k2 = arm.gravity_coefficients      # both links hanging straight down
+        return -self.gravity * (abs(k1) + abs(k2))
