@@ -30,11 +30,18 @@ LEVELS = dict(zip(LOG_LEVELS, (logging.DEBUG, logging.INFO, logging.WARNING, log
 
 def configure_logging(level: str | None) -> None:
     """ROS-style lines on stderr: [INFO] [1700000000.123456789] [arm_sim]: text."""
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _Stderr()
     handler.setFormatter(_RosFormatter())
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(LEVELS[level or "info"])
+
+
+class _Stderr(logging.StreamHandler):
+    """Lines go to sys.stderr as it is when each is written: a handler holding the stream of
+    its day outlives a redirect (a test's capture), then a later library line (matplotlib's
+    first font scan) meets a closed file."""
+    stream = property(lambda self: sys.stderr, lambda self, value: None)
 
 
 class _RosFormatter(logging.Formatter):
