@@ -13,8 +13,9 @@ RNG = np.random.default_rng(7)
 
 
 def single(scene, steps, command=None):
-    """q1, q2, qd1, qd2, work, dissipated of one arm (0 for an absent channel)."""
-    sim = Simulator(scene)
+    """q1, q2, qd1, qd2, work, dissipated of one arm (0 for an absent channel), stepped as
+    a batch steps it: the stability plan's sub-steps, no tolerance's (tools/batch.py)."""
+    sim = Simulator(scene.replace(tolerance=0.0))
     if command is not None:
         sim.set_command(*command)
     for _ in range(steps):

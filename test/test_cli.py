@@ -60,7 +60,8 @@ def test_run_overrides_turn_release_into_the_shoulder_torque_scene(capsys):
 
 
 def test_run_step_and_duration_from_the_command_line(capsys):
-    code, out, _ = run_cli(capsys, "run", "--step", "0.005", "--duration", "2", "--json")
+    code, out, _ = run_cli(capsys, "run", "--step", "0.005", "--duration", "2", "--json",
+                           "--tolerance", "0")      # the explainer's program: plain RK4
     assert f"{json.loads(out)['max_abs_energy_drift']:.9f}" == "0.000011084"
 
 

@@ -1,11 +1,17 @@
-"""Issue 14 parts 1-2: every step's local error estimate, its sum, and the tolerance.
+"""Issues 14 and 22: every step's local error estimate, the global error estimate, and the
+tolerance.
 
-The accumulated estimate is compared with the true error (the largest |q, qd| difference at
-any step) against scipy's DOP853 at rtol = atol = 1e-13; for scenes that switch modes
-(friction, limits, clamps: events.py) against the same event-located stepper at h/64,
-since DOP853 knows no modes (RK4 at h/64 is 64^4 ~ 1.7e7 times closer). Within a factor of
-10 where the errors do not grow along the motion; where they do, it is documented below.
-Every scene runs at the default tolerance unless named otherwise.
+The global estimate (`accumulated_error`: the largest distance of the motion from its
+shadow, physics/accuracy.py) is compared with the true error (the largest |q, qd|
+difference at any step) against scipy's DOP853 at rtol = atol = 1e-13; for scenes that
+switch modes (friction, limits, clamps: events.py) against the same event-located stepper
+at h/16 held to a tolerance at rounding (an order of accuracy and 16^4 closer).
+
+The rule, on every preset, every integrator and random scenes, with no exceptions: the
+estimate is within a factor of 10 of the true error; where the true error is rounding
+(< 1e-10) the estimate is rounding too; where the run says it lost the motion (global
+error beyond 1 rad: a step far too coarse, or chaos), the estimate says at least that
+much and so does the true error.
 """
 from math import isnan
 
@@ -13,8 +19,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE
-from arm_sim_ros.physics.scene import Scene, load_scene
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE, LOST
+from arm_sim_ros.physics.scene import Scene, load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 FINE = 16   # reference sub-division for switching scenes (and a tolerance of 1e-11)
@@ -45,8 +54,8 @@ def reference(scene, sim, steps):
     return states
 
 
-def ratio(scene, duration):
-    """(accumulated estimate / the largest true error, the largest true error)."""
+def errors(scene, duration):
+    """(the global estimate, the largest true error, the simulator after the run)."""
     sim = Simulator(scene)
     steps = scene.steps_for(duration)
     expected = reference(scene, sim, steps)
@@ -54,66 +63,92 @@ def ratio(scene, duration):
     for k in range(1, steps + 1):
         sim.step()
         true = max(true, max(abs(a - b) for a, b in zip(sim.state[:4], expected[k][:4])))
-    return sim.accumulated_error / true, true
+    return sim.accumulated_error, true, sim
 
 
-HOLDS = {
-    "release": (load_scene("release"), 2.0),
-    "damped_release": (load_scene("damped_release"), 2.0),
-    "shoulder_torque_no_gravity": (load_scene("shoulder_torque_no_gravity"), 2.0),
-    "per_joint_damping": (load_scene("per_joint_damping"), 2.0),
-    "springs_oscillation": (load_scene("springs_oscillation"), 2.0),
-    "payload_release": (load_scene("payload_release"), 2.0),
-    "wrong_payload_model": (load_scene("wrong_payload_model"), 2.0),
-    "geared_release": (load_scene("geared_release"), 2.0),
+def ratio(scene, duration):
+    """(global estimate / the largest true error, the largest true error)."""
+    estimate, true, _ = errors(scene, duration)
+    return estimate / true, true
+
+
+ROUNDING = 1e-10
+
+
+def assert_honest(scene, duration, name=""):
+    estimate, true, sim = errors(scene, duration)
+    if true <= ROUNDING:
+        assert estimate <= 10 * ROUNDING, (name, estimate, true)
+    elif sim.accuracy.shadow.lost:
+        assert estimate >= LOST and true >= 0.1 * LOST, (name, estimate, true)
+        assert any("no longer follows" in e.message for e in sim.events), name
+    else:
+        assert 0.1 <= estimate / true <= 10.0, (name, estimate / true, true)
+
+
+CASES = {name: (load_scene(name), 2.0) for name in preset_names()}
+CASES |= {
     "spin_1ms": (spin(0.001), 1.0),
     "spin_10ms": (spin(0.01), 1.0),
     "spin_1ms_estimate_only": (spin(0.001, tolerance=0.0), 1.0),
     "spin_10ms_estimate_only": (spin(0.01, tolerance=0.0), 1.0),
     "spin_damped": (spin(0.001, damping=0.5), 1.0),
-    "release_rk38": (load_scene("release").replace(integrator="rk38"), 2.0),
-    "release_midpoint_estimate_only": (load_scene("release").replace(integrator="midpoint",
-                                                                     tolerance=0.0), 2.0),
-    # switching scenes (events.py): smooth steps on the schedule, every step starting with a
-    # compliant limit engaged estimated piece by piece, and, when steps are not split,
-    # every step with a located switch
-    "effort_limited_hold": (load_scene("effort_limited_hold"), 2.0),
 }
+CASES |= {f"release_{integrator}_tolerance_{tolerance:g}": (
+    load_scene("release").replace(integrator=integrator, tolerance=tolerance), 2.0)
+    for integrator in ("rk38", "midpoint", "euler", "semi_implicit_euler", "dopri5")
+    for tolerance in (0.0, DEFAULT_TOLERANCE)}
 
 
-@pytest.mark.parametrize("name", list(HOLDS))
-def test_the_accumulated_estimate_is_within_a_factor_of_10_of_the_true_error(name):
-    scene, duration = HOLDS[name]
-    r, true = ratio(scene, duration)
-    assert true > 1e-12
-    assert 0.1 <= r <= 10.0, (name, r, true)
+@pytest.mark.parametrize("name", list(CASES))
+def test_the_global_estimate_is_within_a_factor_of_10_of_the_true_error(name):
+    scene, duration = CASES[name]
+    assert_honest(scene, duration, name)
 
 
-def test_where_it_does_not_hold_it_is_known_and_on_which_side():
-    """Open (issue 22, part 4): a sum of local errors is not a global error where the
-    motion contracts errors (an attracting hold, a joint that sticks) or maps them through
-    a contact's timing (the velocity jumps while the contact lasts). Measured with the
-    controller that follows the error both ways; what remains to be built is an error
-    propagated along the motion."""
-    def r(scene):
-        return ratio(scene, 2.0)[0]
-    assert 10.0 < r(load_scene("motor_windings_hold")) < 100.0     # attracting hold: over
-    assert 10.0 < r(load_scene("stick_slip")) < 100.0               # sticking wipes errors
-    assert r(load_scene("compliant_limit")) < 0.1                   # contact timing: under
-    assert r(load_scene("limit_impact")) < 0.1                      # impact timing: under
-    assert 10.0 < r(load_scene("moving_frozen_gravity").replace(tolerance=0.0)) < 20.0
-    assert r(load_scene("moving_frozen_gravity")) < 0.1            # errors grow: under
-    # dopri5 reports its 4th-order companion's error for its 5th-order solution: over
-    assert 10.0 < r(load_scene("release").replace(integrator="dopri5")) < 20.0
+@st.composite
+def random_scenes(draw):
+    """Effects, step, initial state and tolerance drawn at random."""
+    keys = {"gravity": draw(st.sampled_from([0.0, 9.81])),
+            "step_size": draw(st.sampled_from([0.001, 0.002, 0.005, 0.01])),
+            "tolerance": draw(st.sampled_from([0.0, DEFAULT_TOLERANCE, 1e-7])),
+            "initial_positions": (draw(st.floats(-1.0, 1.0)), draw(st.floats(-1.5, 1.5))),
+            "initial_velocities": (draw(st.floats(-4.0, 4.0)), draw(st.floats(-4.0, 4.0)))}
+    if draw(st.booleans()):
+        keys["damping"] = draw(st.floats(0.05, 3.0))
+    if draw(st.booleans()):
+        keys["springs"] = {"stiffness": (draw(st.floats(1.0, 100.0)),
+                                         draw(st.floats(1.0, 100.0)))}
+    if draw(st.booleans()):
+        keys["payload"] = {"mass": draw(st.floats(0.0, 2.0))}
+    if draw(st.booleans()):
+        coulomb = (draw(st.floats(0.05, 2.0)), draw(st.floats(0.05, 1.0)))
+        keys["friction"] = {"coulomb": coulomb,
+                            "static": tuple(c * draw(st.floats(1.0, 1.5)) for c in coulomb)}
+    limits = draw(st.sampled_from([None, "hard", "compliant"]))
+    if limits:
+        keys["joint_limits"] = {"lower": (-1.3, -1.8), "upper": (1.3, 1.8)} | (
+            {"restitution": draw(st.floats(0.0, 0.9))} if limits == "hard" else
+            {"stiffness": draw(st.floats(1e3, 1e5)), "damping": draw(st.floats(0.0, 30.0))})
+    return Scene(**keys)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(random_scenes())
+def test_the_global_estimate_is_honest_on_random_scenes(scene):
+    assert_honest(scene, 1.0, scene)
 
 
 @pytest.mark.parametrize("h", [0.001, 0.01])
 def test_the_default_tolerance_keeps_a_fast_spin_honest(h):
+    """A relative energy drift of 1.5e-6 at 1 ms and 3.6e-7 at 10 ms over 5 s (the count
+    follows the error both ways: it no longer keeps the peak's count to the end)."""
     sim = Simulator(spin(h))
     assert sim.scene.tolerance == DEFAULT_TOLERANCE > 0
     start, drift = sim.energy(sim.state), [0.0]
     sim.run(5.0, lambda s: drift.__setitem__(0, max(drift[0], abs(s.energy(s.state) - start))))
-    assert drift[0] / start < 1e-6
+    assert drift[0] / start < 2e-6
     assert sim.substeps_taken > 0 and any(e.kind == "substepping" for e in sim.events)
     plain = Simulator(spin(h, tolerance=0.0))
     plain.run(0.5)
@@ -121,11 +156,9 @@ def test_the_default_tolerance_keeps_a_fast_spin_honest(h):
 
 
 @pytest.mark.parametrize("name,h,duration", [
-    ("release", 0.01, 2.0), ("release", 0.005, 2.0), ("release", 0.0005, 2.0),
     ("shoulder_torque_no_gravity", 0.01, 0.5), ("moving_gravity_compensation", 0.01, 1.0),
-    ("moving_frozen_gravity", 0.01, 0.5), ("downward_equilibrium", 0.01, 2.0),
-    ("damped_release", 0.01, 2.0)])
-def test_the_default_tolerance_leaves_every_explainer_figure_bit_for_bit(name, h, duration):
+    ("downward_equilibrium", 0.01, 2.0), ("damped_release", 0.01, 2.0)])
+def test_where_plain_steps_meet_the_default_tolerance_they_stay_plain(name, h, duration):
     runs = []
     for tolerance in (0.0, DEFAULT_TOLERANCE):
         sim = Simulator(load_scene(name).replace(step_size=h, tolerance=tolerance))
@@ -134,6 +167,15 @@ def test_the_default_tolerance_leaves_every_explainer_figure_bit_for_bit(name, h
         runs.append(states)
         assert sim.substeps_taken == 0
     assert runs[0] == runs[1]
+
+
+def test_the_default_tolerance_splits_release_where_the_elbow_whips():
+    """Plain RK4 at 10 ms makes up to ~1e-3 rad per s there, 20x the default tolerance:
+    the steps are split where it does and given back after."""
+    sim = Simulator(load_scene("release"))
+    counts = []
+    sim.run(4.0, lambda s: counts.append(s.accuracy.substeps))
+    assert counts[0] == 1 and max(counts) > 1 and min(counts[len(counts) // 2:]) == 1
 
 
 def test_stiff_modes_that_decay_within_the_step_do_not_split_it():
@@ -155,7 +197,7 @@ def test_every_integrator_and_switching_scene_reports_an_estimate():
     for integrator in ("rk4", "rk38", "midpoint", "euler", "semi_implicit_euler", "dopri5"):
         sim = Simulator(load_scene("release").replace(integrator=integrator))
         sim.run(0.5)
-        assert sim.error_estimate > 0 and sim.accumulated_error >= sim.error_estimate
+        assert sim.error_estimate > 0 and sim.accumulated_error > 0
         sim.reset()
         assert sim.accumulated_error == 0.0
     for name in ("stick_slip", "limit_impact", "compliant_limit", "effort_limited_hold"):

@@ -60,10 +60,10 @@ class ArmSimCore:
                                  self.late_ticks)
 
     def _on_sim_event(self, event) -> None:
-        """What the simulator does later (a driver saturating...) reaches the log as it
-        happens; a fault is logged where the tick holds (_advance)."""
-        if event.kind == "switch":           # stick, slip, impact...: the physics, not a fault
-            self.log.info(f"{event.message} (at t = {event.t:.6f} s)")
+        """What the simulator does later reaches the log as it happens (a fault: _advance)."""
+        if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
+            (self.log.info if event.kind == "switch" else self.log.error)(
+                f"{event.message} (at t = {event.t:.6f} s)")
         elif event.kind != "fault":
             self.warnings.warning(event.kind, f"{event.message} (at t = {event.t:.6f} s)")
 

@@ -1,98 +1,48 @@
-"""How far each step is from the exact flow, and the sub-steps that keep it under a
-tolerance: an error estimate on a schedule and a step-size controller that moves both ways.
+"""How far each step is from the exact flow, how far the run is from the true motion, and
+the sub-steps that keep each step under a tolerance.
 
-Estimator (measured: benchmarks/bench_tolerance.py, test/test_error_estimate.py): Richardson
-step doubling on a schedule. A check takes the step (n equal sub-steps, bit for bit the
-plain step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1) is the step's
-local error at its end (p = the tableau's order). Measured at the end, not as n x the
-first sub-step: a stiff mode the stability plan's sub-steps damp out within the step has
-decayed by then. The estimate is carried to the steps until the next check, so an
-unchecked step is the compiled step called by the simulator directly, nothing else.
-
-Schedule: every CHECK_EVERY-th step; every RELAXED_EVERY-th while the estimate is under
-RELAXED x the tolerance at the planned count; a check costs 2 steps' evaluations.
+Local error (measured: benchmarks/bench_tolerance.py, test/test_error_estimate.py):
+Richardson step doubling on a schedule. A check takes the step (n equal sub-steps, bit
+for bit the plain step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1)
+is the step's local error at its end, signed, for every state (p = the tableau's order).
+At the end, not as n x the first sub-step: a stiff mode the stability plan's sub-steps
+damp out within the step has decayed by then. An embedded pair (dopri5) is measured
+against its own step at 1/TIGHTER of its tolerances. Checks come every MIN_EVERY steps
+at first, then as often as the local error moves (shadow.py: up to every MAX_EVERY).
 Switching scenes (events.py): every step in which a switch is located, and every step
-that starts with a compliant limit engaged, is checked; each smooth piece up to a switch
-is doubled and the pieces' errors are summed.
+with a compliant limit engaged, is checked, each smooth piece up to a switch doubled.
 
-Controller: the sub-step size h / n follows the error both ways, as a PI step-size
-controller does (Gustafsson; Hairer & Wanner II.4, scipy's RK45): the local error of a
-step of n sub-steps goes as n^-p, so with r = scaled error / (SAFETY x tolerance x h),
-n' = n r^(KI/p) (r / r_prev)^(KP/p), growth of the sub-step bounded by MAX_GROWTH per check
-and its shrink by MAX_SHRINK; a check that misses the tolerance (r > 1 / SAFETY) is taken
-again at the count it asks for. Tick boundaries stay exact: a step is always n equal
-sub-steps. The stability plan's count is a floor, never a ratchet; `max_substeps` is the
-ceiling: past it the step is taken at the cap and the run says once what error it reached.
-On switching scenes the sub-steps of a compliant contact and of free motion are
-controlled apart (a contact needs fine steps, the flight between contacts does not).
+Global error (`accumulated_error`, shadow.py): the shadow takes the same steps as the
+run from the estimated true state, less each step's local error; the run's largest
+distance from it. It contracts where the motion contracts errors, grows where it grows
+them, and crosses every switch at its own time, so it stays within a factor of 10 of the
+true error on every preset, integrator and random scene (test/test_error_estimate.py).
+Past LOST (1 rad) the run says once that it no longer follows the true motion.
 
-`error_estimate` is the latest check's local error (max over q, qd of |e|, rad and rad/s);
-`accumulated_error` sums them over the steps (carried steps at the mean of the checks
-either side; until then at half the latest, so the sum never goes down).
-
-Tolerance: the scaled error max(|e_q|, |e_qd| / (1 + |qd|)) per step is held under
-tolerance x h (per simulated second, so the bound on the drift does not depend on h;
-angles unscaled: they are unwrapped, their size says nothing). 0 turns the controller off
-(estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s spin needs <= 1e-4
-for a relative energy drift < 1e-6 over 5 s at h = 10 ms, and the explainer's figures are
-left bit for bit down to 3e-5.
+Tolerance (controller.py): the scaled error max(|e_q|, |e_qd| / (1 + |qd|)) of a step is
+held under tolerance x h (per simulated second, so the bound on the drift does not depend
+on h; angles unscaled: unwrapped, their size says nothing), never under ROUNDING. The
+sub-step count follows the error both ways (a PI controller); a step that misses is taken
+again; the stability plan's count is the floor and `max_substeps` the ceiling, said once
+when it cannot meet the tolerance, as is a tolerance that splitting does not reach. On
+switching scenes compliant contact and free flight are controlled apart, and a count the
+controller asks for at a switch applies from the next step. 0 turns the controller off
+(estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s spin drifts 3.6e-7
+of its energy over 5 s at h = 10 ms, 1.5e-6 at 1 ms.
 """
 from __future__ import annotations
 
-from math import ceil, isfinite
-
 from . import stability
+from .controller import SAFETY, Control, retake, said_count, said_unreachable
+from .integrators import compile_step
+from .shadow import LOST, MIN_EVERY, Shadow, Twin, next_every
 
-CHECK_EVERY = 16          # steps between doubling checks (a check: 2 steps' evaluations)
-RELAXED_EVERY = 32        # ... while the estimate is under RELAXED x the tolerance at the
-RELAXED = 1.0 / 16.0      # planned count (a step twice as long would still meet it: 2^4)
-SAFETY = 0.5              # counts aim at half the tolerance: fewer retaken steps
-KI, KP = 0.7, 0.4         # PI gains on ln(error) (Hairer & Wanner's 0.7/k, 0.4/k)
-MAX_GROWTH = 2.0          # a sub-step grows at most 2x per check ...
-MAX_SHRINK = 10.0         # ... and shrinks at most 10x per retake
-KEEP = 0.9                # fewer sub-steps only when the controller asks for < 90 %
+ROUNDING = 1e-13           # the least scaled error per step a tolerance asks for (doubles)
+TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
 DEFAULT_MAX_SUBSTEPS = 1000   # the tolerance's ceiling per step (scene key max_substeps)
 MAX_SUBSTEPS = stability.MAX_SUBSTEPS   # what a scene may set it to
 # Per simulated second, scaled error (see above); 0 = off (estimate only).
 DEFAULT_TOLERANCE = 5e-5
-
-
-def proposed(n: int, ratio: float, previous: float, order: int, floor: int, cap: int) -> int:
-    """The sub-steps the controller asks for after a step of n sub-steps measured at
-    `ratio` = scaled error / (SAFETY tolerance h) (`previous`: the check before)."""
-    if not isfinite(ratio):
-        return min(cap, max(floor, ceil(n * MAX_SHRINK)))
-    ratio, previous = max(ratio, 1e-12), max(previous, 1e-12)
-    factor = ratio ** (KI / order) * (ratio / previous) ** (KP / order)
-    wanted = n * min(MAX_SHRINK, max(1.0 / MAX_GROWTH, factor))
-    if wanted < n and wanted > KEEP * n:
-        return n
-    return max(floor, min(cap, ceil(wanted - 1e-9)))
-
-
-def retake(n: int, ratio: float, order: int, cap: int) -> int:
-    """The count a step that missed the tolerance is taken again at: where its error
-    (as n^-p) meets SAFETY x the tolerance, at least one more, at most the cap."""
-    wanted = n * min(MAX_SHRINK, ratio ** (1.0 / order)) if isfinite(ratio) else n * MAX_SHRINK
-    return min(cap, max(n + 1, ceil(wanted - 1e-9)))
-
-
-class Control:
-    """One sub-step count under the controller: its floor, its ceiling, its last ratio."""
-
-    def __init__(self, floor: int, cap: int):
-        self.floor, self.cap = floor, max(floor, cap)
-        self.n, self.previous = floor, 1.0
-
-    def ask(self, ratio: float, order: int) -> int:
-        """The count for the next steps after a step measured at `ratio`. At the floor, a
-        step that met the tolerance asks for nothing more (plain steps stay plain: the
-        explainer's figures bit for bit); above it the count follows the error both ways."""
-        wanted = proposed(self.n, ratio, self.previous, order, self.floor, self.cap)
-        self.previous = ratio if isfinite(ratio) else self.previous
-        if self.n <= self.floor and ratio * SAFETY <= 1.0:
-            return self.n
-        return wanted
 
 
 class Accuracy:
@@ -101,11 +51,14 @@ class Accuracy:
     the estimate is carried between checks, so the sums are counted when asked for."""
 
     def __init__(self, step, order: int, tolerance: float, width: int, substeps: int = 1,
-                 emit=None, clock=None, stepper=None, cap: int = DEFAULT_MAX_SUBSTEPS):
+                 emit=None, clock=None, stepper=None, cap: int = DEFAULT_MAX_SUBSTEPS,
+                 states: int = 4, twin=None):
         self.step, self.order, self.tolerance, self.width = step, order, tolerance, width
+        self.states = states          # q, qd and the effects' extra states (currents)
+        self.twin = twin              # a second switching stepper for the shadow, or None
         self.factor = 2.0 ** order / (2.0 ** order - 1.0)
         self.base = substeps          # the stability plan's count: never fewer
-        self.cap = max(substeps, cap)  # the tolerance's ceiling
+        self.ceiling = max(substeps, cap)  # the tolerance's ceiling (max_substeps)
         self.emit = emit              # emit(kind, message)
         self.clock = clock            # the simulator's step index (the step being taken)
         self.stepper = stepper        # events.Switching: it steps, pieces are estimated
@@ -116,8 +69,11 @@ class Accuracy:
     def reset(self) -> None:
         self.error_estimate = 0.0     # the latest check's local error estimate
         self.since = self.due = 0     # step index of the latest check; of the next
-        self.booked = 0.0             # Σ error_estimate over the steps before `since`
         self.booked_taken = 0         # sub-steps run in split steps before `since`
+        self.shadow = Shadow(self.states)
+        self.every = MIN_EVERY        # steps between checks (schedule): often until it is smooth
+        self.said_lost = False
+        self.cap = self.ceiling       # lowered where the tolerance cannot be reached
         self.free = Control(self.base, self.cap)
         self.contact = Control(0, self.cap)      # engaged pieces (switching stepper)
         self.most = self.base         # the largest count said so far
@@ -134,24 +90,29 @@ class Accuracy:
             self.substeps = n
             if self.stepper is not None:
                 self.stepper.substeps = n
-                self.plain = self.stepper.advance
+                self.advance = self.stepper.advance
             else:
-                self.plain = stability.substepping(self.step, n)
+                self.advance = stability.substepping(self.step, n)
+            self.shadow_advance = Twin(self.stepper, self.twin) if self.twin else self.advance
+
+    def plain(self, f, y, h):
+        """The planned step, and the shadow's beside it."""
+        y1 = self.advance(f, y, h)
+        if self.shadow.last is not y1:   # (a switching step may have been checked instead)
+            self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin)
+        return y1
 
     def carry(self, previous, steps: int) -> None:
-        """Go on from the books `previous` after `steps` steps: their sums (closed: no later
-        check of theirs re-counts their latest steps), a check at once."""
-        self.booked = previous.accumulated(steps, closing=True)
+        """Go on from the books `previous` after `steps` steps: their global error and its
+        shadow's offset, a check at once."""
+        self.shadow.carry(previous.shadow)
         self.booked_taken = previous.taken(steps) or 0
         self.since = self.due = steps
 
-    def accumulated(self, steps: int, closing: bool = False) -> float:
-        """Σ error_estimate over `steps` steps since reset. Steps since the latest check count
-        at half its estimate until the next check books them at the mean of the two (never
-        less: estimates are >= 0), so the sum never goes down; `closing` (no next check:
-        the dynamics are rebuilt) at its estimate."""
-        share = 1.0 if closing else 0.5
-        return self.booked + share * self.error_estimate * (steps - self.since)
+    def accumulated(self, steps: int = 0, closing: bool = False) -> float:
+        """The global error estimate: the largest distance of the motion from its shadow
+        (the same steps from the estimated true state) since reset, rad and rad/s."""
+        return self.shadow.largest
 
     def taken(self, steps: int) -> int:
         """Sub-steps run in split steps over `steps` steps since reset (0: plain steps),
@@ -160,26 +121,32 @@ class Accuracy:
                                     if self.substeps > 1 else 0) + (
             self.stepper.extra_substeps if self.stepper is not None else 0)
 
-    def doubled(self, f, y, h, full, n=1) -> tuple[float, float]:
-        """(local error, scaled error) of y -> full, n equal sub-steps over h, by taking it
-        again as 2n half sub-steps (Richardson: the difference x 2^p / (2^p - 1)): the
-        error at the step's end, where a stiff mode's early sub-step errors have decayed."""
+    def doubled(self, f, y, h, full, n=1) -> tuple[float, float, list]:
+        """(local error, scaled error, signed local error of every state) of y -> full, n
+        equal sub-steps over h, by taking it again as 2n half sub-steps (Richardson: the
+        difference x 2^p / (2^p - 1)): the error at the step's end, where a stiff mode's
+        early sub-step errors have decayed."""
         hs = 0.5 * h / n
         for _ in range(2 * n):
             y = self.step(f, y, hs)
-        errors = [abs(a - b) * self.factor for a, b in zip(full[:self.width], y)]
+        signed = [(a - b) * self.factor for a, b in zip(full[:self.states], y)]
+        errors = [abs(e) for e in signed[:self.width]]
         # angles are unwrapped: their size says nothing of the error they can take
         scaled = max(max(errors[:2]), *(e / (1.0 + abs(a)) for e, a in zip(errors[2:], full[2:])))
-        return max(errors), scaled
+        return max(errors), scaled, signed
 
     def measure(self, f, y, h, n):
-        """(the step as n sub-steps, its error, its scaled error)."""
-        full = self.plain(f, y, h) if n == self.substeps else stability.substepping(
+        """(the step as n sub-steps, its error, its scaled error, its signed error)."""
+        full = self.advance(f, y, h) if n == self.substeps else stability.substepping(
             self.step, n)(f, y, h)
         return (full, *self.doubled(f, y, h, full, n))
 
+    def target(self, h: float) -> float:
+        """The scaled error a step may make: tolerance x h, never under ROUNDING."""
+        return max(self.tolerance * h, ROUNDING)
+
     def ratio(self, scaled: float, h: float) -> float:
-        return scaled / (SAFETY * self.tolerance * h)
+        return scaled / (SAFETY * self.target(h))
 
     def check(self, f, y, h):
         """The step, measured; a miss of the tolerance is taken again at the count the
@@ -187,15 +154,21 @@ class Accuracy:
         index, n = self.clock(), self.substeps
         if self.stepper is not None:
             return self.switching(f, y, h, index, n)
-        y1, error, scaled = self.measure(f, y, h, n)
+        y1, error, scaled, signed = self.measure(f, y, h, n)
         first, wanted = scaled, n
         if self.tolerance:
             wanted = self.free.ask(self.ratio(scaled, h), self.order)
-            while scaled > self.tolerance * h and n < self.cap:      # a miss: retaken
-                n = self.free.n = retake(n, self.ratio(scaled, h), self.order, self.cap)
-                y1, error, scaled = self.measure(f, y, h, n)
+            while scaled > self.target(h) and n < self.cap:      # a miss: retaken
+                before, n = scaled, retake(n, self.ratio(scaled, h), self.order, self.cap)
+                y1, error, scaled, signed = self.measure(f, y, h, n)
+                self.free.n = n
+                if scaled > 0.5 * before:         # splitting does not reduce it: stop here
+                    said_unreachable(self, scaled, n, h)
+                    break
                 wanted = self.free.ask(self.ratio(scaled, h), self.order)
-        self.book(index, error, scaled, n, h, first, wanted)
+        predicted, self.shadow.local = self.shadow.local, signed
+        self.shadow.follow(stability.substepping(self.step, n), f, y, y1, h)
+        self.book(index, error, scaled, n, h, first, wanted, predicted)
         return y1
 
     def switching(self, f, y, h, index, n):
@@ -204,16 +177,25 @@ class Accuracy:
         counts the controller asks for apply from the next step on (this one's switches
         are already booked)."""
         sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0]}    # error, scaled, pieces
-        stepper = self.stepper
+        stepper, signed = self.stepper, [0.0] * self.states
 
         def piece(rhs, y0, dt, full):
-            error, scaled = self.doubled(rhs, y0, dt, full)
+            error, scaled, vector = self.doubled(rhs, y0, dt, full)
             part = sums[bool(stepper.mode[2] or stepper.mode[3])]
             part[0] += error
             part[1] += scaled
             part[2] += 1
+            signed[:] = [a + b for a, b in zip(signed, vector)]
 
+        switches = sum(stepper.counts.values())
         y1 = stepper.advance(f, y, h, piece)
+        predicted, self.shadow.local = self.shadow.local, signed
+        self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin)
+        if sums[True][2] or sum(stepper.counts.values()) != switches:
+            # a switch's or a contact's error is its step's own: the steps after carry the
+            # latest smooth estimate, and are checked again soon
+            self.shadow.local = predicted or [0.0] * self.states
+            predicted = None
         error = sums[False][0] + sums[True][0]
         scaled = sums[False][1] + sums[True][1]
         wanted = n
@@ -225,74 +207,81 @@ class Accuracy:
                 self.contact.n = stepper.substeps_for(h, True)
                 stepper.contact_substeps = self.contact.ask(self.ratio(sums[True][1], h),
                                                             self.order)
-                self.told(stepper.contact_substeps, sums[True][1], h, sums[True][1],
-                          " while a compliant limit is engaged")
-        self.book(index, error, scaled, n, h, scaled, wanted)
+                said_count(self, stepper.contact_substeps, sums[True][1], h, sums[True][1],
+                           " while a compliant limit is engaged")
+        self.book(index, error, scaled, n, h, scaled, wanted, predicted, predicted is None)
         return y1
 
-    def book(self, index, error, scaled, n, h, first, wanted):
+    def schedule(self, predicted, measured) -> int:
+        self.every = next_every(self.every, predicted, measured)
+        return self.every
+
+    def book(self, index, error, scaled, n, h, first, wanted, predicted=None, soon=False):
         """Close the books up to step `index` (which took n sub-steps and made `error`) and
         carry this estimate from it on (predicted at the new count)."""
+        measured = self.shadow.local
         carried = index - self.since            # steps that carried the latest estimate
-        # ... booked at the mean of the checks either side (the error between them moved)
-        self.booked += 0.5 * (self.error_estimate + error) * carried + error
         self.booked_taken += (self.substeps * carried if self.substeps > 1 else 0) + (
             n if n > 1 else 0)
         self.since = index + 1
-        self.error_estimate = error * (n / wanted) ** self.order if wanted != n else error
+        self.error_estimate = error
+        if wanted != n:                # the shadow's correction, predicted at the new count
+            scale = (n / wanted) ** self.order
+            self.shadow.local = [e * scale for e in self.shadow.local]
         self.use(wanted)
-        relax = (wanted <= self.base and self.tolerance
-                 and scaled < RELAXED * self.tolerance * h)
-        self.due = index + (RELAXED_EVERY if relax else CHECK_EVERY)
+        self.due = index + (MIN_EVERY if soon else self.schedule(predicted, measured))
+        if self.shadow.lost and not self.said_lost and self.emit is not None:
+            self.said_lost = True
+            self.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = "
+                      f"{(index + 1) * h:.6g} s: the run no longer follows the true motion (a "
+                      "step too coarse for it, or chaos); the estimate stops at that bound")
         if self.tolerance:
-            self.told(wanted, first, h, scaled)
-
-    def told(self, wanted, first, h, reached=None, where="") -> None:
-        """Say a new highest count once it is, and once that the cap could not meet it."""
-        if self.emit is None:
-            return
-        if wanted >= self.cap and not self.capped and (reached is None or
-                                                       reached > self.tolerance * h):
-            self.capped = True
-            self.emit("substepping", f"tolerance {self.tolerance:g} not met: local error "
-                      f"{(reached if reached is not None else first) / h:.3g} per s (scaled) "
-                      f"at the cap of {self.cap} sub-steps per step (max_substeps); the run "
-                      "goes on at the cap")
-        elif wanted > self.most and wanted > 2 * max(1, self.most):
-            self.most = wanted
-            self.emit("substepping", f"local error {first / h:.3g} per s (scaled) for "
-                      f"tolerance {self.tolerance:g} (aiming at half): each {h:g} s "
-                      f"step{where} is taken as {wanted} sub-steps")
+            said_count(self, wanted, first, h, scaled)
 
 
 class Embedded:
-    """The same books for an embedded pair (dopri5): the step reports its own estimate
-    (the sum over its accepted sub-steps); rtol and atol, not `tolerance`, control it."""
+    """The same books for an embedded pair (dopri5), whose rtol and atol, not `tolerance`,
+    control it. `error_estimate` is the pair's own (the sum over its accepted sub-steps:
+    its 4th-order companion's error, ~10x the 5th-order solution's). The shadow's local
+    error is measured on the schedule against the same step at TIGHTER times smaller
+    tolerances (an error-controlled step's error goes as its tolerance)."""
 
-    due = 0                     # every step is its own check
-
-    def __init__(self, step):
-        self.step, self.substeps = step, 1
-        self.plain = self.check = self.advance
+    def __init__(self, step, tight, states: int = 4, clock=None):
+        self.step, self.tight, self.states, self.clock = step, tight, states, clock
+        self.substeps = 1
         self.reset()
 
     def reset(self) -> None:
-        self.error_estimate = self.accumulated_error = 0.0
+        self.error_estimate = 0.0
+        self.shadow = Shadow(self.states)
+        self.due, self.every = 0, MIN_EVERY
 
     def carry(self, previous, steps: int) -> None:
-        """Go on from the books `previous` after `steps` steps: their sum."""
-        self.accumulated_error = previous.accumulated(steps, closing=True)
+        """Go on from the books `previous` after `steps` steps: their global error."""
+        self.shadow.carry(previous.shadow)
+        self.due = steps
 
-    def accumulated(self, steps: int, closing: bool = False) -> float:
-        return self.accumulated_error
+    def accumulated(self, steps: int = 0, closing: bool = False) -> float:
+        return self.shadow.largest
 
     def taken(self, steps: int) -> int:
         return 0
 
-    def advance(self, f, y, h):
+    def plain(self, f, y, h):
         y1 = self.step(f, y, h)
         self.error_estimate = self.step.last_error
-        self.accumulated_error += self.error_estimate
+        self.shadow.follow(self.step, f, y, y1, h)
+        return y1
+
+    def check(self, f, y, h):
+        y1 = self.step(f, y, h)
+        self.error_estimate = self.step.last_error
+        better = self.tight(f, y, h)
+        measured = [(a - b) * TIGHTER / (TIGHTER - 1.0) for a, b in zip(y1, better[:self.states])]
+        predicted, self.shadow.local = self.shadow.local, measured
+        self.shadow.follow(self.step, f, y, y1, h)
+        self.every = next_every(self.every, predicted, measured)
+        self.due = (self.clock() if self.clock else 0) + self.every
         return y1
 
 
@@ -319,7 +308,8 @@ class Unchecked:
 
 
 def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
-         clock=None, stepper=None, previous=None, cap: int = DEFAULT_MAX_SUBSTEPS):
+         clock=None, stepper=None, previous=None, cap: int = DEFAULT_MAX_SUBSTEPS,
+         states: int = 4, twin=None):
     """The error books, with the step they take (`step` as the stability plan's `substeps`
     equal sub-steps): the embedded pair's own estimate, or checked equal sub-steps (over the
     stability plan's) of a fixed-step method, switched at events by `stepper` if any.
@@ -329,12 +319,14 @@ def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
         # without the switches its error control would chase the kink forever.
         return Unchecked(stepper.advance, substeps, stepper)
     if getattr(tableau, "adaptive", False):
-        books = Embedded(step)        # (an adaptive method plans no sub-steps)
+        tight = compile_step(tableau, step.channels, step.rtol / TIGHTER,
+                             step.atol / TIGHTER, states - 4)
+        books = Embedded(step, tight, states, clock)   # (an adaptive method plans no sub-steps)
     elif substeps > stability.MAX_SUBSTEPS:   # the stability plan refuses: keep its refusal
         return Unchecked(stability.substepping(step, substeps), substeps)
     else:
         books = Accuracy(step, tableau.order, tolerance, width, substeps, emit, clock, stepper,
-                         cap)
+                         cap, states, twin)
     if previous is not None:        # go on from here: the sums so far, a check at once
         books.carry(previous, clock())
     return books

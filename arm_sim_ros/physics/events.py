@@ -80,13 +80,14 @@ class Switching:
         self.locate = True                # False: switch at sub-step ends (first order)
         self.checked = None               # advance, estimated (accuracy.py), or None
         self.extra_substeps = 0           # sub-steps taken beyond the planned count since reset
-        self._functions, self.mode, self._last = {}, None, None
+        # `last`: the state the mode belongs to (the shadow's stepper sets it, accuracy.py)
+        self._functions, self.mode, self.last = {}, None, None
 
     def reset(self) -> Counter:
         """Forget the mode (found again from the next state) and the counts, which are
         returned: Simulator.switch_events."""
         self.counts.clear()
-        self.mode, self._last, self.extra_substeps = None, None, 0
+        self.mode, self.last, self.extra_substeps = None, None, 0
         return self.counts
 
     # --- modes ---------------------------------------------------------------------------
@@ -137,7 +138,7 @@ class Switching:
         """step(f, y, h) with every switch inside the step located and applied (f unused:
         each mode has its own right-hand side). `piece(rhs, y0, dt, y1)` is told every
         smooth sub-step taken, up to a located switch (accuracy.py estimates them)."""
-        if y is not self._last:                  # reset, or a state set from outside
+        if y is not self.last:                  # reset, or a state set from outside
             self.mode = self.settle(y, self.clamped(y, initial_mode(self, y)))
         elif self.clamps is not None and self.clamps.stale():   # a new command
             self.mode = self.settle(y, self.clamped(y, self.mode))
@@ -148,7 +149,7 @@ class Switching:
             if not kinds or min(guard(*y1[:self.width])) >= 0.0:
                 if piece is not None:
                     piece(rhs, y, h, y1)
-                self._last = y1
+                self.last = y1
                 return y1
         if piece is None and self.checked is not None and (self.substeps == 1 or engaged):
             return self.checked(f, y, h)     # a switch inside or a contact: estimate it
@@ -185,7 +186,7 @@ class Switching:
                 taken += count
         if taken > self.substeps:                 # engaged, or re-split after a switch
             self.extra_substeps += taken - (self.substeps if self.substeps > 1 else 0)
-        self._last = y = tuple(y)
+        self.last = y = tuple(y)
         return y
 
     def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed, piece=None):

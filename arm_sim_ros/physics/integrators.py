@@ -281,4 +281,5 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
 
     step.source = source
     step.rtol, step.atol, step.last_error = float(rtol), float(atol), 0.0
+    step.channels = channels
     return step

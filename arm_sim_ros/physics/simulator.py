@@ -105,10 +105,7 @@ class Simulator:
         self.switching = switching_for(      # friction, limits, clamps: events.py
             self.dynamics, self._tableau, self._step, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
-        self.accuracy = accuracy.plan(   # the planned step, its error checked (accuracy.py)
-            self._tableau, self._step, self.substeps, scene.tolerance, 4, self._emit,
-            lambda: self.steps, self.switching, getattr(self, "accuracy", None),
-            int(scene.max_substeps))
+        self.accuracy = books_for(self, scene)   # the planned step, its error checked
 
     def reset(self) -> None:
         s = self.scene
@@ -212,7 +209,7 @@ class Simulator:
         if why is None:
             self._sound = self.state
             if guard.audit(self):              # books that do not close: said once
-                self._emit("fault", self.books_fault)
+                self._emit("books", self.books_fault)
         else:                             # the step just counted is refused after all
             self.state, self.diverged = self._sound, why
             self._refuse(why, "the last sound state", self.steps - 1)
@@ -272,6 +269,17 @@ class Simulator:
         if steps and not self.holding:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest
+
+
+def books_for(sim: Simulator, scene: Scene):
+    """The error books (accuracy.py) of the simulator's step, with the shadow's own
+    switching stepper where the scene switches (it says nothing: its switches are not the
+    run's)."""
+    twin = sim.switching and switching_for(sim.dynamics, sim._tableau, sim._step, sim.substeps,
+                                           lambda kind, message: None, lambda: 0.0)
+    return accuracy.plan(sim._tableau, sim._step, sim.substeps, scene.tolerance, 4, sim._emit,
+                         lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
+                         int(scene.max_substeps), 4 + len(sim.extra), twin)
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:

@@ -1,0 +1,83 @@
+"""The global error, propagated along the motion, and the schedule of the checks that
+measure the local error it is built from (accuracy.py).
+"""
+from __future__ import annotations
+
+CHECK_EVERY = 16          # steps between doubling checks (a check: 2 steps' evaluations):
+MIN_EVERY, MAX_EVERY = 2, 32   # from MIN_EVERY at the start, then as often as the local
+ROUGH, SMOOTH = 0.5, 0.125     # error moves: twice as often past ROUGH x its size, half
+                               # as often under SMOOTH x its size
+LOST = 1.0                # rad (velocities scaled): a global error beyond this has lost the motion
+
+
+def next_every(every: int, predicted, measured) -> int:
+    """Steps to the next check: the shadow carries each check's local error to the steps
+    after it, which is right while that error moves slowly; where it moves as fast as its
+    size (an elbow whipping, a joint about to stick) checks come more often."""
+    if predicted is not None:
+        change = max(abs(a - b) for a, b in zip(measured[:4], predicted[:4]))
+        size = max(*(abs(a) for a in measured[:4]), *(abs(b) for b in predicted[:4]))
+        if change > ROUGH * size:
+            return max(MIN_EVERY, every // 2)
+        if change < SMOOTH * size:
+            return min(MAX_EVERY, 2 * every)
+    return every
+
+
+class Shadow:
+    """The global error, propagated along the motion. The shadow takes the same steps as
+    the motion, from the estimated true state, less each step's estimated local error (the
+    latest check's, signed, carried between checks): it follows the true motion, and the
+    motion's distance from it is the global error as it is, contracted where the motion
+    contracts errors (damping, an attracting hold, a joint that sticks), grown where it
+    grows them, and carried through every switch at the shadow's own time (an impact's
+    timing becomes a velocity error). `largest` is the largest distance since reset."""
+
+    def __init__(self, states: int):
+        self.states = states
+        self.local = None            # signed local error of every state per step
+        self.offset = None           # motion - shadow at `last` (None: none yet)
+        self.last = self.shadow = None
+        self.largest = 0.0
+        self.lost = False            # the distance passed LOST: no longer followed
+
+    def carry(self, previous) -> None:
+        self.largest, self.local = previous.largest, None
+        if previous.offset is not None:
+            self.offset = list(previous.offset[:4]) + [0.0] * (self.states - 4)
+
+    def follow(self, advance, f, y, y1, h, twin=None) -> None:
+        """After the motion's step y -> y1: the shadow's step (by `advance`)."""
+        if self.local is None or self.lost:   # no estimate yet: the shadow is the motion
+            return
+        n = self.states
+        if y is not self.last:        # reset, or a state set from outside: same offset
+            offset = self.offset or [0.0] * n
+            self.shadow = (*(a - e for a, e in zip(y[:n], offset)), *y[n:])
+        if sum(y1[:4]) - sum(y1[:4]) != 0.0:   # the motion's step is refused: no shadow
+            return
+        z1 = advance(f, self.shadow, h)
+        z1 = (*(a - e for a, e in zip(z1[:n], self.local)), *z1[n:])
+        if twin is not None:
+            twin.last = z1            # its mode goes on from the corrected state
+        offset = [a - b for a, b in zip(y1[:n], z1[:n])]
+        distance = max(abs(offset[0]), abs(offset[1]), abs(offset[2]), abs(offset[3]))
+        scaled = max(abs(offset[0]), abs(offset[1]), abs(offset[2]) / (1.0 + abs(y1[2])),
+                     abs(offset[3]) / (1.0 + abs(y1[3])))
+        if not scaled <= LOST:        # NaN too: the motion is lost, its error unknowable
+            self.lost, distance = True, max(self.largest, LOST)
+        self.largest = max(self.largest, distance)
+        self.shadow, self.offset, self.last = z1, offset, y1
+
+
+class Twin:
+    """The shadow's step on a switching stepper of its own (its modes switch at its own
+    times), at the counts the motion's stepper uses."""
+
+    def __init__(self, stepper, twin):
+        self.stepper, self.twin = stepper, twin
+
+    def __call__(self, f, z, h):
+        self.twin.substeps = self.stepper.substeps
+        self.twin.contact_substeps = self.stepper.contact_substeps
+        return self.twin.advance(f, z, h)
