@@ -111,6 +111,12 @@ def test_the_docs_have_blocks_that_run_and_the_readme_is_short():
     assert len((ROOT / "README.md").read_text(encoding="utf-8").splitlines()) <= 250
 
 
+def test_every_picture_the_docs_show_exists():
+    for path in DOCS:
+        for target in re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", path.read_text(encoding="utf-8")):
+            assert (path.parent / target).is_file(), f"{path.relative_to(ROOT)}: {target}"
+
+
 def test_a_skip_marker_is_recognised_only_right_before_its_block(tmp_path):
     page = tmp_path / "page.md"
     page.write_text("<!-- not run: needs ROS 2 sourced -->\n```bash\nros2 topic list\n```\n\n"
