@@ -2,8 +2,8 @@
 they cannot go stale.
 
 Blocks run in the order they appear, one file after another, from the repository root, with
-the venv's bin first on PATH, a temporary HOME, a DDS domain of their own on loopback, and no
-network (proxies point nowhere, pip may not reach an index). A block immediately preceded by
+the venv's bin first on PATH, a temporary HOME, a DDS domain of their own on loopback (ROS 2
+left out, so nodes run on the dds transport), and no network (proxies point nowhere, pip may not reach an index). A block immediately preceded by
 `<!-- not run: REASON -->` is skipped; NOT_RUN lists every such block with its reason, and
 the test fails when a skip has no reason. What the blocks write (runs/ and the like, all in
 .gitignore) is removed after each file, and a runs/ that was there before is put back.
@@ -45,7 +45,9 @@ NOT_RUN_BLOCKS = [(path.relative_to(ROOT).as_posix(), line, reason)
 
 
 def environment(home: Path) -> dict:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "RMW_", "CYCLONEDDS"))}
+    # ROS 2 left out even where it is sourced: the blocks' nodes run on the dds transport
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("ROS_", "RMW_", "CYCLONEDDS")) and k != "PYTHONPATH"}
     nowhere = "http://127.0.0.1:9"          # no network: anything that tries fails at once
     return env | {
         "PATH": f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
