@@ -44,6 +44,18 @@ def test_urdf_of_the_scenes_own_arm_says_nothing_was_replaced(tmp_path, capsys):
     assert "nothing replaced" in capsys.readouterr().err
 
 
+def test_the_node_says_what_its_robot_description_replaced(tmp_path, capsys):
+    urdf = tmp_path / "arm.urdf"
+    assert cli.main(["urdf", "--scene", "limit_impact", "-o", str(urdf)]) == 0
+    log = ListLog()
+    config = node_params.resolve_parameters({"scene": "damped_release",
+                                             "robot_description": urdf.read_text()})
+    node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0).finish()
+    assert [m for _, m in log.lines if "started" in m] == [
+        "scene damped_release started: policy command, h = 0.01 s, 1 steps per tick; "
+        "robot_description replaced: damping 0.5 -> 0; joint_limits none -> {lower, upper}"]
+
+
 def test_an_initial_angle_beyond_a_full_turn_warns_once_and_suggests_degrees(capsys):
     assert cli.main(["run", "--set", "initial_positions=90,-30", "--duration", "0.1"]) == 0
     warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]

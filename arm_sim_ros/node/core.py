@@ -13,7 +13,8 @@ import time
 from math import isfinite
 
 from ..interface import NODE_NAME
-from ..physics.scene import angle_warning
+from ..physics.scene import angle_warning, changed_values, load_scene
+from ..physics.urdf import read_urdf
 from ..physics.simulator import Simulator
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -225,9 +226,15 @@ class ArmSimCore:
 
 
 def started(config: NodeConfig) -> str:
-    scene = config.scene
-    return (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
+    """The start line; with a robot_description, every scene value the URDF replaced."""
+    scene, values = config.scene, config.values
+    text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
             f"{config.steps_per_tick} steps per tick")
+    if values["robot_description"]:
+        base = load_scene(values["scene"])
+        changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))
+        text += f"; robot_description replaced: {'; '.join(changed) or 'nothing'}"
+    return text
 
 
 def clock_origin_ns(config: NodeConfig, given: int | None) -> int:

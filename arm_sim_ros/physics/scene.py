@@ -244,6 +244,19 @@ def parse_value(key: str, text: str):
     return text
 
 
+def changed_values(scene: "Scene", other: "Scene") -> list[str]:
+    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
+    what a URDF replaced."""
+    def shown(value):
+        if isinstance(value, tuple):
+            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
+        if isinstance(value, dict):
+            return "{" + ", ".join(value) + "}"
+        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
+    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
+            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]
+
+
 def angle_warning(scene: "Scene", node: bool = False) -> str | None:
     """A sentence when an initial angle is beyond one turn: likely degrees given as radians."""
     beyond = [q for q in scene.initial_positions if abs(q) > 2 * pi]

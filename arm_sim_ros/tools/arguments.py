@@ -5,7 +5,8 @@ import sys
 from dataclasses import replace as dataclass_replace
 from pathlib import Path
 
-from ..physics.scene import FIELD_KINDS, Scene, SceneError, angle_warning, load_scene, parse_value
+from ..physics.scene import (Scene, SceneError, angle_warning, changed_values, load_scene,
+                             parse_value)
 from ..physics.urdf import read_urdf
 
 
@@ -32,15 +33,7 @@ def scene_from_args(args, note=None) -> Scene:
 
 def urdf_replacements(path: str, scene: Scene, on_urdf: Scene) -> str:
     """One line: every scene value the URDF replaced, old -> new (a table by its key only)."""
-    def shown(value):
-        if isinstance(value, tuple):
-            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
-        if isinstance(value, dict):
-            return "{" + ", ".join(value) + "}"
-        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
-
-    changed = [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(on_urdf, key))}"
-               for key in FIELD_KINDS if getattr(scene, key) != getattr(on_urdf, key)]
+    changed = changed_values(scene, on_urdf)
     if not changed:
         return f"--urdf {path}: the arm of scene {scene.name} already; nothing replaced"
     return f"--urdf {path} replaced in scene {scene.name}: {'; '.join(changed)}"
