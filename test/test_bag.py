@@ -70,6 +70,9 @@ def test_run_bag_is_a_jazzy_mcap_bag_with_definitions_and_offered_qos(capsys, tm
     assert (path / "bag.mcap").read_bytes()[:8] == b"\x89MCAP0\r\n"
     info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["ros_distro"] == "jazzy"              # what `ros2 bag info` shows as ROS Distro
+    start = info["starting_time"]["nanoseconds_since_epoch"]
+    assert abs(start - time.time_ns()) < 3600 * 10**9  # started now, not on 1 Jan 1970
     assert info["message_count"] == 51 + 51 + 1
     topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
     assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == NODE_TOPICS
@@ -92,14 +95,17 @@ def test_run_bag_is_a_jazzy_mcap_bag_with_definitions_and_offered_qos(capsys, tm
 ])
 def test_run_bag_joint_states_equal_the_core_at_the_publish_rate(capsys, tmp_path, scene_name,
                                                                   rate, every):
+    before = time.time_ns()
     path = run_bag(capsys, tmp_path, "--scene", scene_name, "--publish-rate", str(rate))
     messages, _ = read_bag(path)
+    origin = messages["/joint_states"][0][0]      # bag time of t = 0: the wall clock at start
+    assert before <= origin <= time.time_ns()
     expected = core_samples(load_scene(scene_name), every)
     recorded = messages["/joint_states"]
     assert len(recorded) == len(expected)
     for (steps, sample), (timestamp, message, _) in zip(expected, recorded):
         t_ns = round(steps * 0.01 * 1e9)
-        assert timestamp == t_ns  # bag time is simulated time
+        assert timestamp == origin + t_ns  # bag time: wall clock at start + simulated time
         assert message.header.stamp.sec * 10**9 + message.header.stamp.nanosec == t_ns
         assert list(message.name) == ["shoulder_joint", "elbow_joint"]
         assert message.position.tolist() == list(sample.q)
@@ -127,12 +133,13 @@ def test_run_bag_diagnostics_every_simulated_second_and_at_the_end(capsys, tmp_p
     path = run_bag(capsys, tmp_path, "--scene", "damped_release", "--duration", "2.5")
     messages, _ = read_bag(path)
     diagnostics = messages["/diagnostics"]
-    assert [t for t, _, _ in diagnostics] == [1_000_000_000, 2_000_000_000, 2_500_000_000]
+    origin = messages["/joint_states"][0][0]
+    assert [t - origin for t, _, _ in diagnostics] == [1_000_000_000, 2_000_000_000, 2_500_000_000]
     sim = Simulator(load_scene("damped_release"))
     node = node_core.ArmSimCore(node_params.resolve_parameters({}), logging.getLogger("keys"))
     node_keys = [key for key, _ in node.diagnostics().values]
     for timestamp, message, _ in diagnostics:
-        sim.run(timestamp / 1e9 - sim.time)
+        sim.run((timestamp - origin) / 1e9 - sim.time)
         (status,) = message.status
         values = {kv.key: kv.value for kv in status.values}
         assert status.level == 0 and status.name == "arm_sim: simulation"
@@ -389,7 +396,9 @@ def test_record_refuses_before_joining_the_network(capsys, tmp_path):
     assert not (tmp_path / "new").exists()
 
 
-def test_a_node_recording_and_an_arm_sim_record_bag_of_the_same_run_line_up(tmp_path):
+@pytest.mark.parametrize("domain, clock_origin", [(52, "zero"), (53, "wall")])
+def test_a_node_recording_and_an_arm_sim_record_bag_of_the_same_run_line_up(tmp_path, domain,
+                                                                            clock_origin):
     """The node writes a Rerun recording while `arm-sim record` (its TopicRecorder) writes a
     bag of the same run: every JointState in the bag is a row of the recording at the same
     ros_time (its header stamp) with the same angles, so both open on one clock."""
@@ -397,14 +406,15 @@ def test_a_node_recording_and_an_arm_sim_record_bag_of_the_same_run_line_up(tmp_
     from test_telemetry import read_back
     from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
-    domain, rrd = 52, tmp_path / "node.rrd"
+    rrd = tmp_path / "node.rrd"
     recorder = wire.make_participant(domain, ISOLATED)
     finish = start_recording(tmp_path / "bag", {"/joint_states": NODE_TOPICS["/joint_states"]},
                              recorder)
     try:
+        started = time.time_ns()
         node = DdsArmSimNode({"scene": "damped_release", "publish_rate": 50.0,
-                              "rerun_path": str(rrd)}, domain_id=domain, config=ISOLATED,
-                             wall_clock=lambda: 100.0, start_stamp_ns=1_700_000_000_123_000_000)
+                              "rerun_path": str(rrd), "clock_origin": clock_origin},
+                             domain_id=domain, config=ISOLATED, wall_clock=lambda: 100.0)
         wait_matched([node.joint_state_writer])
         for _ in range(30):
             node.tick()
@@ -414,6 +424,9 @@ def test_a_node_recording_and_an_arm_sim_record_bag_of_the_same_run_line_up(tmp_
         counts = finish()
     assert counts == {"/joint_states": 30}
     messages, _ = read_bag(tmp_path / "bag")
+    first = messages["/joint_states"][0][1].header.stamp
+    origin = first.sec * 10**9 + first.nanosec - 20_000_000      # the first tick is 20 ms in
+    assert origin == 0 if clock_origin == "zero" else started <= origin <= time.time_ns()
     angles = read_back(rrd)["joints/angle"]
     recorded = dict(zip(angles["ros_time"], angles["Scalars:scalars"]))
     for _, message, _ in messages["/joint_states"]:

@@ -245,7 +245,7 @@ def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_i
     live = {"effort_limits", "friction", "controller_model", "payload"}
     assert {n.partition(".")[0] for n in names & set(LIVE)} == live
     assert set(LIVE) == {"damping"} | {n for n in names if n.partition(".")[0] in live}
-    assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic",
+    assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
                                "joint_commands_topic"} | (names - set(LIVE))
 
 

@@ -84,8 +84,10 @@ def test_arm_sim_run_rerun_and_bag_of_one_run_line_up_on_ros_time(tmp_path, caps
     angles = at(columns["joints/angle"], "ros_time")
     states = bag_joint_states(bag)
     assert len(states) == 11
+    bag_origin = states[0][0]                   # bag time: the wall clock at start + sim time
+    assert before <= bag_origin <= after
     for log_ns, stamp, position in states:      # offline stamps: simulated time from 0
-        assert log_ns == stamp
+        assert log_ns == bag_origin + stamp
         assert np.allclose(angles[stamp], position, atol=0, rtol=0)
     assert columns["joints/angle"]["ros_time"] == columns["joints/angle"]["sim_time"]
     # log_time: the wall clock when the recorder got each row, in order, within the run

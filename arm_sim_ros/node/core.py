@@ -3,9 +3,9 @@ the parameters (parameters.py), the command intake (commands.py) and the recorde
 (recorder_link.py). The rclpy and dds transports call into this; it imports neither.
 
 Time: each tick advances exactly `steps_per_tick` RK4 steps of `step_size`, so simulated time
-is always steps x step_size whether ticks come early, late or as fast as possible. Stamps are
-the wall time at start plus simulated time, so a recording's stamps advance by exactly
-1/publish_rate.
+is always steps x step_size whether ticks come early, late or as fast as possible. Stamps (and
+/clock) are an origin plus simulated time, so they advance by exactly 1/publish_rate: the
+origin is 0 (`clock_origin` zero, as Gazebo's /clock) or the wall clock at start (wall).
 """
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ import time
 from math import isfinite
 
 from ..interface import NODE_NAME
+from ..physics.scene import angle_warning, changed_values, load_scene
+from ..physics.urdf import read_urdf
 from ..physics.simulator import Simulator
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -28,7 +30,7 @@ class ArmSimCore:
                  start_stamp_ns: int | None = None, recorder=None):
         self.log = log
         self.wall_clock = wall_clock
-        self.start_stamp_ns = time.time_ns() if start_stamp_ns is None else start_stamp_ns
+        self.start_stamp_ns = clock_origin_ns(config, start_stamp_ns)
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
@@ -38,8 +40,9 @@ class ArmSimCore:
         self.recorder = RecorderLink(log, recorder if recorder is not None
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
-        self._event(f"scene {config.scene.name} started: policy {config.scene.policy}, "
-                    f"h = {config.scene.step_size:g} s, {config.steps_per_tick} steps per tick")
+        self._event(started(config))
+        if warning := angle_warning(config.scene, node=True):
+            log.warning(warning)
 
     received_commands = property(lambda self: self.commands.received)
     refused_commands = property(lambda self: self.commands.refused)
@@ -127,8 +130,7 @@ class ArmSimCore:
         if names != ["payload.mass"]:
             self.sim.change_scene(self.config.scene.replace(payload=self.sim.scene.payload))
         self.recorder.start(self.sim)
-        self._event(f"{', '.join(names)} changed at t = {self.sim.time:.6f} s: the motion "
-                    "carries on from the current state (a payload's energy: payload_exchange)")
+        self._event(live_change(names, self.config.values, self.sim.time))
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
@@ -221,3 +223,30 @@ class ArmSimCore:
     def status_line(self, rtf: float) -> str:
         """The one-line status the node prints each second."""
         return status_line(self.sim, self.held, rtf, self.refused_commands)
+
+
+def started(config: NodeConfig) -> str:
+    """The start line; with a robot_description, every scene value the URDF replaced."""
+    scene, values = config.scene, config.values
+    text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
+            f"{config.steps_per_tick} steps per tick")
+    if values["robot_description"]:
+        base = load_scene(values["scene"])
+        changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))
+        text += f"; robot_description replaced: {'; '.join(changed) or 'nothing'}"
+    return text
+
+
+def clock_origin_ns(config: NodeConfig, given: int | None) -> int:
+    """What stamps and /clock count from: a given origin (a transport's clock, a test's fixed
+    one), else 0 (clock_origin zero) or the wall clock now (wall)."""
+    if given is not None:
+        return given
+    return time.time_ns() if config.values["clock_origin"] == "wall" else 0
+
+
+def live_change(names: list, values: dict, t: float) -> str:
+    """The log line of a live change: what changed, to what, and when."""
+    what = ", ".join(f"{name} -> {values[name]}" for name in names)
+    booked = "; the payload's energy is booked in payload_exchange" if "payload.mass" in names else ""
+    return f"{what} at t = {t:.6f} s: the motion carries on from the current state{booked}"

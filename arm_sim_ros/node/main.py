@@ -108,7 +108,10 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     ours, ros_argv = split_ros_args(argv)
     # launch stops nodes with SIGINT, then SIGTERM: both end the loop the same clean way.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    # SIGINT too, explicitly: Python leaves it ignored when the parent started us with it
+    # ignored (`nohup`, `cmd &` in a script), and then Ctrl-C could never stop the node.
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, signal.default_int_handler)
     try:
         args = build_parser().parse_args(ours)
         if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:

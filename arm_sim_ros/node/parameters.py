@@ -15,6 +15,7 @@ from ..physics.model import ParameterError
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
+CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
 
 
 class ParameterRefused(ValueError):
@@ -154,6 +155,9 @@ PARAMETERS = (
                   "hardware interface)", when=START),
     ParameterSpec("publish_clock", "bool", True, "publish rosgraph_msgs/Clock on /clock every "
                   "tick: simulated time, equal to the JointState stamps"),
+    ParameterSpec("clock_origin", "str", "zero", "what /clock and the stamps count from: zero "
+                  "(simulated time from 0 at start, as Gazebo does) or wall (the wall clock at "
+                  "start + simulated time)", when=START),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
 )
@@ -325,6 +329,8 @@ def _check_node_values(values: dict) -> None:
         ("command_timeout", values["command_timeout"] >= 0, "must be >= 0 (0 = hold forever)"),
         ("torque_limit", values["torque_limit"] > 0, "must be positive (N m)"),
         ("joint_names", len(values["joint_names"]) == 2, "needs exactly two names"),
+        ("clock_origin", values["clock_origin"] in CLOCK_ORIGINS,
+         f"must be one of {', '.join(CLOCK_ORIGINS)}"),
     )
     for name, ok, reason in checks:
         if not ok:

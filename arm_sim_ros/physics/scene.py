@@ -5,10 +5,11 @@ A scene is data: presets live in config/scenes/*.yaml. Every value passes throug
 """
 from __future__ import annotations
 
+import difflib
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from math import isfinite
+from math import isfinite, pi, radians
 from pathlib import Path
 
 from .. import yaml_files
@@ -19,6 +20,9 @@ from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
 
 MAX_INITIAL_ANGLE = 1e6   # rad
+# Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
+ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
+              "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 
@@ -233,13 +237,53 @@ def parse_value(key: str, text: str):
         raise SceneError(f"--set {key}=... sets one parameter at a time: {key}.NAME=VALUE")
     try:
         if kind == "pair":
-            return tuple(float(v) for v in text.split(","))
+            return tuple(_number(key, v) for v in text.split(","))
         if kind == "float":
-            return float(text)
+            return _number(key, text)
+    except SceneError:
+        raise
     except ValueError:
         raise SceneError(f"{key}={text!r} is malformed: expected "
                          f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
     return text
+
+
+def changed_values(scene: "Scene", other: "Scene") -> list[str]:
+    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
+    what a URDF replaced."""
+    def shown(value):
+        if isinstance(value, tuple):
+            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
+        if isinstance(value, dict):
+            return "{" + ", ".join(value) + "}"
+        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
+    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
+            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]
+
+
+def angle_warning(scene: "Scene", node: bool = False) -> str | None:
+    """A sentence when an initial angle is beyond one turn: likely degrees given as radians."""
+    beyond = [q for q in scene.initial_positions if abs(q) > 2 * pi]
+    if not beyond:
+        return None
+    if node:   # ROS 2 parameters are plain doubles: give the radians
+        meant = "-p initial_positions:=[" + ", ".join(
+            f"{radians(q):.6g}" for q in scene.initial_positions) + "]"
+    else:
+        meant = "initial_positions=" + ",".join(f"{q:g}deg" for q in scene.initial_positions)
+    return (f"initial_positions {list(scene.initial_positions)} rad: {beyond[0]:g} rad is more "
+            f"than a full turn (2π = 6.283 rad); angles are radians. If you meant degrees, "
+            f"write {meant}")
+
+
+def _number(key: str, text: str) -> float:
+    """A number; an angle may be given in degrees as `90deg`."""
+    text = text.strip()
+    if text.endswith("deg"):
+        if key not in ANGLE_KEYS:
+            raise SceneError(f"{key}={text!r}: only angles take deg ({', '.join(ANGLE_KEYS)})")
+        return radians(float(text[:-3]))
+    return float(text)
 
 
 def scene_dirs() -> list[Path]:
@@ -273,8 +317,11 @@ def load_scene(name: str = "release") -> Scene:
         path = directory / f"{name}.yaml"
         if _is_file(path):
             return scene_from_file(path, name)
-    known = ", ".join(preset_names()) or "none found"
-    raise SceneError(f"unknown scene {name!r}; presets: {known} (or give a path to a .yaml file)")
+    names = preset_names()
+    close = difflib.get_close_matches(name.replace("-", "_"), names, n=1, cutoff=0.6)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    raise SceneError(f"unknown scene {name!r}; {hint}presets: {', '.join(names) or 'none found'} "
+                     "(or give a path to a .yaml file)")
 
 
 def _is_file(path: Path) -> bool:

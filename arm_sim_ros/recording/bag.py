@@ -58,6 +58,9 @@ class BagError(UsageError):
     """A bag that cannot be written; one line on stderr and exit code 2, like bad usage."""
 
 
+ROS_DISTRO = "jazzy"   # the distro whose message definitions and bag format these are (`ros2 bag info`)
+
+
 # --- messages (rosbags' Jazzy classes) -----------------------------------------------------
 
 def _msg(msgtype: str):
@@ -259,7 +262,7 @@ class BagWriter:
                 **span(), "message_count": count, "topics_with_message_count": topics,
                 "compression_format": "", "compression_mode": "",
                 "files": [{"path": name, **span(), "message_count": count}],
-                "custom_data": None, "ros_distro": "rosbags"}
+                "custom_data": None, "ros_distro": ROS_DISTRO}
 
     def _fail(self, error: OSError):
         """The disk refused a write: close with what is in the file, then say so."""

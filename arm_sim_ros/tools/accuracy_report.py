@@ -2,12 +2,13 @@
 scenes, and the work-precision diagram, one panel per scene."""
 from __future__ import annotations
 
-from math import ceil, isfinite
+import textwrap
+import zlib
+from math import ceil, isfinite, log10
 from pathlib import Path
 
 from ..usage import UsageError
 
-MARKERS = "osD^v<>pPX*h"
 PANEL_SIZE = (6.4, 4.6)          # inches per panel
 MAX_COLUMNS = 2
 TARGET = 1e-6                   # the price list: the cheapest run at least this accurate
@@ -115,48 +116,88 @@ def write_plot(results: list, path) -> None:
         raise UsageError(f"--plot {path}: cannot write: {error.strerror}") from None
 
 
+# One colour and marker per integrator or peer, the same in every plot and every run.
+# MuJoCo's lines are dashed; our tolerance sweeps thick; the scene as set a black star.
+SERIES_STYLE = {
+    "euler": ("#393b79", "x"), "semi_implicit_euler": ("#ff7f0e", "s"),
+    "midpoint": ("#7f7f7f", "^"), "rk4": ("#1f77b4", "o"), "rk38": ("#bcbd22", "v"),
+    "dopri5": ("#2ca02c", "D"),
+    "rk4 + tolerance": ("crimson", "s"), "rk38 + tolerance": ("#8b4513", "P"),
+    "mujoco Euler": ("#e377c2", "<"), "mujoco implicit": ("#9467bd", ">"),
+    "mujoco implicitfast": ("#8c564b", "h"), "mujoco RK4": ("#17becf", "d"),
+}
+SPARE_STYLES = [("#637939", "p"), ("#ad494a", "*"), ("#3182bd", "X"), ("#756bb1", "H")]
+TARGET_LINE = {"color": "grey", "linestyle": ":", "linewidth": 1.2}
+FLOOR_LINE = {"color": "#555555", "linestyle": "-.", "linewidth": 1.5}
+TARGET_LABEL = f"{TARGET:g}: the price list's target"
+FLOOR_LABEL = "MuJoCo's error floor (soft constraints)"
+LEGEND_COLUMN_INCHES = 4.2       # one legend column at fontsize 8 holds the longest label
+LABEL_SPACING = (0.3, 0.45)      # decades in x and y between two tolerance labels
+
+
 def plot(results, path: str) -> None:
     """Work-precision diagram: max state error against CPU time, log-log, one panel per
-    scene; ours solid, MuJoCo dashed, the tolerance sweep and the scene as set marked."""
+    scene; ours solid, MuJoCo dashed, the tolerance sweep and the scene as set marked.
+    Constrained layout with the legend outside the panels and a tight bounding box: the
+    title, every panel and the whole legend fit at any number of scenes."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     columns = min(MAX_COLUMNS, len(results))
     rows = ceil(len(results) / columns)
-    fig, axes = plt.subplots(rows, columns, squeeze=False, dpi=100,
-                             figsize=(PANEL_SIZE[0] * columns, PANEL_SIZE[1] * rows + 0.9))
-    kinds = {r["series"]: r["kind"] for result in results for r in result["runs"]}
-    style = {name: _style(kind, i) for i, (name, kind) in enumerate(kinds.items())}
+    width = PANEL_SIZE[0] * columns
+    title = textwrap.fill("What accuracy costs: max state error vs CPU time, ours and MuJoCo "
+                          "on the same scenes", width=int(width * 72 / (12 * 0.55)))
+    entries = len(legend_labels(results))
+    ncols = max(1, min(entries, int(width // LEGEND_COLUMN_INCHES)))
+    # the figure grows by what the title and the legend need: the panels keep their size
+    height = (PANEL_SIZE[1] * rows + 0.25 * (title.count("\n") + 1) + 0.3
+              + 0.19 * ceil(entries / ncols))
+    fig, axes = plt.subplots(rows, columns, squeeze=False, dpi=100, layout="constrained",
+                             figsize=(width, height))
     for ax, result in zip(axes.flat, results):
-        panel(ax, result, style)
+        panel(ax, result)
     for ax in list(axes.flat)[len(results):]:
         ax.axis("off")
     handles = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)
-    fig.legend(list(handles.values()), list(handles), loc="lower center", fontsize=8,
-               ncol=min(4, len(handles)), frameon=False)
-    fig.suptitle("What accuracy costs: max state error vs CPU time, ours and MuJoCo "
-                 "on the same scenes", fontsize=12)
-    legend_rows = ceil(len(handles) / 4)
-    fig.tight_layout(rect=(0, 0.025 * legend_rows * 2 / rows, 1, 0.97))
-    fig.savefig(path)
+    fig.legend(list(handles.values()), list(handles), loc="outside lower center", fontsize=8,
+               ncols=ncols, frameon=False)
+    fig.suptitle(title, fontsize=12)
+    fig.savefig(path, bbox_inches="tight", pad_inches=0.15)
     plt.close(fig)
 
 
-def _style(kind: str, i: int) -> dict:
-    if kind == "mujoco":
-        return {"linestyle": "--", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
-                "linewidth": 1.2, "alpha": 0.85}
+def legend_labels(results) -> list:
+    """Every legend entry the panels will draw, in order: lines, then the guide lines."""
+    labels = {}
+    for result in results:
+        for name in dict.fromkeys(r["series"] for r in result["runs"]):
+            runs = [r for r in result["runs"] if r["series"] == name
+                    and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
+            if runs:
+                labels.setdefault(_label(name, runs[0]))
+    if any(result["peers"].get("mujoco", {}).get("floor") for result in results):
+        labels.setdefault(FLOOR_LABEL)
+    return list(labels) + [TARGET_LABEL]
+
+
+def _style(name: str, kind: str) -> dict:
     if kind == "as set":
         return {"linestyle": "none", "marker": "*", "markersize": 13, "color": "black"}
+    color, marker = SERIES_STYLE.get(name) or SPARE_STYLES[zlib.crc32(name.encode())
+                                                            % len(SPARE_STYLES)]
+    if kind == "mujoco":
+        return {"linestyle": "--", "marker": marker, "markersize": 4, "linewidth": 1.2,
+                "alpha": 0.85, "color": color}
     if kind == "tolerance":
-        return {"linestyle": "-", "marker": "s", "markersize": 5, "linewidth": 2.2,
-                "color": "crimson"}
-    return {"linestyle": "-", "marker": MARKERS[i % len(MARKERS)], "markersize": 4,
-            "linewidth": 1.4}
+        return {"linestyle": "-", "marker": marker, "markersize": 5, "linewidth": 2.2,
+                "color": color}
+    return {"linestyle": "-", "marker": marker, "markersize": 4, "linewidth": 1.4,
+            "color": color}
 
 
 def _label(name: str, run: dict) -> str:
@@ -171,29 +212,34 @@ def _label(name: str, run: dict) -> str:
     return f"ours {name}, h sweep"
 
 
-def panel(ax, result: dict, style: dict) -> None:
+def panel(ax, result: dict) -> None:
+    labelled = []                     # (log10 x, log10 y) of the tolerance labels so far
     for name in dict.fromkeys(r["series"] for r in result["runs"]):
         runs = [r for r in result["runs"] if r["series"] == name
                 and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
         if not runs:
             continue
-        label = _label(name, runs[0])
+        style = _style(name, runs[0]["kind"])
         ax.loglog([r["cpu_s_per_sim_s"] * 1e6 for r in runs],
-                  [r["max_state_error"] for r in runs], label=label, **style[name])
+                  [r["max_state_error"] for r in runs], label=_label(name, runs[0]), **style)
         if runs[0]["kind"] == "tolerance":          # which tolerance each point is
-            for r in runs[::2]:
-                ax.annotate(f"{r['tolerance']:g}", (r["cpu_s_per_sim_s"] * 1e6,
-                                                   r["max_state_error"]),
-                            fontsize=6.5, color="crimson", textcoords="offset points",
-                            xytext=(4, 2))
+            for r in runs:
+                x, y = r["cpu_s_per_sim_s"] * 1e6, r["max_state_error"]
+                if _crowded(labelled, log10(x), log10(y)):
+                    continue
+                labelled.append((log10(x), log10(y)))
+                ax.annotate(f"{r['tolerance']:g}", (x, y), fontsize=6.5, color=style["color"],
+                            textcoords="offset points", xytext=(4, 2))
     floor = result["peers"].get("mujoco", {}).get("floor")
     if floor:
-        ax.axhline(floor, color="tab:purple", linestyle=":", linewidth=1.5,
-                   label="MuJoCo's floor (soft constraints)")
-        ax.annotate("MuJoCo floor", (0.01, floor), xycoords=("axes fraction", "data"),
-                    xytext=(2, 3), textcoords="offset points", fontsize=7, color="tab:purple")
-    ax.axhline(TARGET, color="grey", linestyle=":", linewidth=1)
+        ax.axhline(floor, label=FLOOR_LABEL, **FLOOR_LINE)
+    ax.axhline(TARGET, label=TARGET_LABEL, **TARGET_LINE)
     ax.set_xlabel("CPU µs per simulated second (lower is cheaper)")
     ax.set_ylabel("max |state error| (rad, rad/s)")
     ax.set_title(f"{result['scene']} ({result['duration']:g} s)", fontsize=10)
     ax.grid(True, which="major", alpha=0.4)
+
+
+def _crowded(labelled, x: float, y: float) -> bool:
+    return any(abs(x - lx) < LABEL_SPACING[0] and abs(y - ly) < LABEL_SPACING[1]
+               for lx, ly in labelled)

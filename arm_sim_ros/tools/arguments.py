@@ -1,24 +1,45 @@
 """What every `arm-sim` subcommand shares: choosing a scene from the command line."""
 from __future__ import annotations
 
+import sys
+from dataclasses import replace as dataclass_replace
 from pathlib import Path
 
-from ..physics.scene import Scene, SceneError, load_scene, parse_value
-from ..physics.urdf import scene_from_urdf
+from ..physics.scene import (Scene, SceneError, angle_warning, changed_values, load_scene,
+                             parse_value)
+from ..physics.urdf import read_urdf
 
 
-def scene_from_args(args) -> Scene:
+def scene_from_args(args, note=None) -> Scene:
     """The scene named by --scene, the arm of --urdf on it, then --step and --set applied
-    (shared by subcommands)."""
+    (shared by subcommands). `note` (default: stderr) hears one line naming what --urdf
+    replaced and one warning when an initial angle looks like degrees."""
+    note = note or (lambda line: print(f"arm-sim: {line}", file=sys.stderr))
     scene = load_scene(args.scene)
     if getattr(args, "urdf", None) is not None:
-        scene = scene_from_urdf(read_urdf_file(args.urdf), scene)
+        robot = read_urdf(read_urdf_file(args.urdf))
+        on_urdf = robot.scene(scene)
+        note(urdf_replacements(args.urdf, scene, on_urdf))
+        # the header and the recording then say whose arm this is
+        scene = dataclass_replace(on_urdf, name=f"{scene.name} on {Path(args.urdf).name}")
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
     for key in ("tolerance", "max_substeps"):
         if getattr(args, key, None) is not None:
             scene = scene.replace(**{key: parse_value(key, getattr(args, key))})
-    return scene.with_text_overrides(getattr(args, "set", None) or [])
+    scene = scene.with_text_overrides(getattr(args, "set", None) or [])
+    warning = angle_warning(scene)
+    if warning:
+        note(f"warning: {warning}")
+    return scene
+
+
+def urdf_replacements(path: str, scene: Scene, on_urdf: Scene) -> str:
+    """One line: every scene value the URDF replaced, old -> new (a table by its key only)."""
+    changed = changed_values(scene, on_urdf)
+    if not changed:
+        return f"--urdf {path}: the arm of scene {scene.name} already; nothing replaced"
+    return f"--urdf {path} replaced in scene {scene.name}: {'; '.join(changed)}"
 
 
 def read_urdf_file(path: str) -> str:

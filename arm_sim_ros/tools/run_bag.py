@@ -1,8 +1,10 @@
 """`arm-sim run ... --bag DIR`: the topics the node would have published, from an offline run.
 
-JointState every publish period (stamped with simulated time, the bag's clock too), the
-applied command when the policy takes commands, and the node's diagnostics every simulated
-second; written through recording.bag's BagWriter, so the bag opens even after a kill -9
+JointState every publish period (header stamps: simulated time from 0, as the node's with
+clock_origin zero), the applied command when the policy takes commands, and the node's
+diagnostics every simulated second. The bag's own clock (each message's receive time, what
+`ros2 bag info` shows) is the wall clock when the run started plus simulated time, as
+`ros2 bag record` of the node would have written it, so the bag does not start in 1970; written through recording.bag's BagWriter, so the bag opens even after a kill -9
 (losing at most its last CHUNK_SECONDS of wall time) and a full disk closes it with what fit.
 The last diagnostics say how the run ended: finished, stopped early (and by what, when the
 caller sets `stop_reason`), or holding after a fault.
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 from math import ceil, isfinite
 from pathlib import Path
-from time import perf_counter
+from time import perf_counter, time_ns
 
 from ..interface import ERROR, NODE_TOPICS, OK, WARN
 from ..node.core import diagnostic_values
@@ -45,7 +47,7 @@ APPLIED_COMMAND_POLICIES = ("constant", "command", "command_gravity_compensation
 
 class RunBag:
     """A recorder for `arm-sim run`: JointState every publish period (stamped with
-    simulated time, the bag's clock too), the applied command alongside it when the
+    simulated time; bag time is the run's wall start + simulated time), the applied command alongside it when the
     policy takes commands, and diagnostics every simulated second (and at the end)."""
 
     def __init__(self, path, publish_steps: int):
@@ -55,7 +57,8 @@ class RunBag:
         self.stop_reason = None   # what stopped the run early (a signal's name), if the caller knows
 
     def start(self, sim) -> None:
-        self.writer = BagWriter(self.path)
+        self.bag_origin_ns = time_ns() - nanoseconds(sim)   # bag time = this + simulated time
+        self.writer = BagWriter(self.path, start_ns=self.bag_origin_ns)
         self.end_steps = sim.steps + sim.scene.steps_for(sim.scene.duration, sim.step_size)
         self.commands = sim.scene.policy in APPLIED_COMMAND_POLICIES
         for topic, msgtype in NODE_TOPICS.items():
@@ -86,9 +89,10 @@ class RunBag:
         s, t = sim.sample(), nanoseconds(sim)
         if not sim.holding:  # the largest |residual| at a tick, as the node keeps it
             self.max_abs_residual = max(self.max_abs_residual, abs(s.residual))
-        self.writer.write("/joint_states", t, joint_state(t, s.q, s.qd, s.tau))
+        at = self.bag_origin_ns + t
+        self.writer.write("/joint_states", at, joint_state(t, s.q, s.qd, s.tau))
         if self.commands:
-            self.writer.write("/joint_torque_commands", t, torque_command(applied_command(sim)))
+            self.writer.write("/joint_torque_commands", at, torque_command(applied_command(sim)))
 
     def diagnose(self, sim, ending: bool = False) -> None:
         """The node's diagnostics, same keys; an offline run refuses and misses nothing."""
@@ -99,7 +103,7 @@ class RunBag:
                           else (OK, "running"))
         values = diagnostic_values(sim, f"{sim.time / wall:.3f}" if wall > 0 else "inf",
                                    self.max_abs_residual, sim.holding, command, self.publish_steps)
-        self.writer.write("/diagnostics", t, diagnostic_array(t, message, level=level, values=values))
+        self.writer.write("/diagnostics", self.bag_origin_ns + t, diagnostic_array(t, message, level=level, values=values))
         self.last_diagnostics = sim.steps
 
     def ending(self, sim) -> tuple[int, str]:
@@ -120,7 +124,8 @@ def applied_command(sim):
 def run_recorder(args):
     """RUN_RECORDERS hook: a RunBag for `--bag DIR`, refused before the run if the rate
     does not divide the step or DIR exists."""
-    steps = steps_per_publish(scene_from_args(args).step_size, args.publish_rate)
+    steps = steps_per_publish(scene_from_args(args, note=lambda line: None).step_size,  # said once
+                              args.publish_rate)
     if Path(args.bag).exists():
         raise BagError(f"--bag {args.bag} exists already; a recording never overwrites one")
     return RunBag(args.bag, steps)

@@ -68,8 +68,9 @@ class ArmSimNode(Node):
                 self.declare_parameter(spec.name, defaults[spec.name], ParameterDescriptor(
                     description=spec.description, dynamic_typing=True))
         config = resolve_parameters({name: self.get_parameter(name).value for name in SPECS})
-        self.core = ArmSimCore(config, self.get_logger(), wall_clock,
-                               self.get_clock().now().nanoseconds, recorder)
+        origin = (self.get_clock().now().nanoseconds   # with use_sim_time: /clock's time
+                  if config.values["clock_origin"] == "wall" else 0)
+        self.core = ArmSimCore(config, self.get_logger(), wall_clock, origin, recorder)
         self.add_on_set_parameters_callback(self.on_set_parameters)
 
         values = config.values

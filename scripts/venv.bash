@@ -1,0 +1,42 @@
+# Sourced by scripts/run and scripts/test: make the project venv once, then leave it alone.
+# pip runs only when the venv is new, setup.py changed since the last install, the venv was
+# installed from another checkout, or it lacks the extras asked for; a stamp file per extras
+# set in the venv holds setup.py's hash and this checkout's path. So after set-up both
+# scripts start in well under a second and work with no network.
+#   ensure_venv EXTRAS    (EXTRAS: "" for the package alone, "test,bench" for the suite)
+# Needs: root (this checkout, absolute) and venv set by the caller.
+
+setup_stamp() {   # what a stamp must hold for this checkout's setup.py
+  local hash
+  if command -v sha256sum >/dev/null 2>&1; then
+    hash=$(sha256sum "$root/setup.py" | cut -d' ' -f1)
+  else
+    hash=$(python3 -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$root/setup.py")
+  fi
+  printf '%s %s\n' "$hash" "$root"
+}
+
+ensure_venv() {
+  local extras="$1" stamp want target
+  if [ ! -x "$venv/bin/python" ]; then
+    echo "scripts: creating the venv $venv (once)" >&2
+    python3 -m venv "$venv" || {
+      echo "scripts: error: could not create a venv at $venv; on Debian/Ubuntu: apt-get install python3-venv" >&2
+      exit 1; }
+  fi
+  stamp="$venv/.arm_sim_ros-installed${extras:+-$extras}"
+  want=$(setup_stamp)
+  if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+    return 0
+  fi
+  target="$root"
+  [ -n "$extras" ] && target="$root[$extras]"
+  echo "scripts: installing $target into $venv (setup.py is new to this venv)" >&2
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check -e "$target" || {
+    echo "scripts: error: pip could not install the dependencies (no network on first set-up?); run again when online" >&2
+    exit 1; }
+  printf '%s\n' "$want" > "$stamp"
+  # the full install also satisfies the plain one
+  [ -n "$extras" ] && printf '%s\n' "$want" > "$venv/.arm_sim_ros-installed"
+  return 0
+}
