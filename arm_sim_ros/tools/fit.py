@@ -141,10 +141,13 @@ def summarise(problem: Problem, results, names) -> dict:
     residuals = np.concatenate(blocks)
     jac = problem.jacobian(xp, states, problem.training, blocks)
     stats = uncertainty(jac, residuals, problem.n_parameters)
-    values = problem.values(xp)
+    fitted = with_values(problem.base, problem.free, problem.values(xp))
+    values = np.array([p.value(fitted) for p in problem.free])   # Fs below Fc acts as Fc
     se = stats["se"] * problem.scale
     runs = problem.simulate(xp, states, problem.training)
-    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], runs, names)
+    chi2 = 2 * r["cost"] / r["residuals"]
+    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], runs,
+                            names, chi2)
     errors = np.vstack([run - problem.measured(g) for run, g in zip(runs, problem.training)])
     start = problem.values(np.ones(problem.n_parameters))
     return {
@@ -154,7 +157,7 @@ def summarise(problem: Problem, results, names) -> dict:
         "correlation": stats["correlation"].tolist(),
         "warnings": warnings,
         "training": {"rms": np.sqrt(np.mean(errors ** 2, axis=0)).tolist(),
-                     "chi2_per_residual": 2 * r["cost"] / r["residuals"],
+                     "chi2_per_residual": chi2,
                      "segments": len(problem.training)},
         "noise": [s.tolist() for s in problem.sigma],
         "validation": validate(problem, xp),

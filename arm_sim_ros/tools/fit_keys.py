@@ -112,8 +112,7 @@ def start_values(free, scene: Scene) -> list[float]:
 
 
 def with_values(scene: Scene, free, values) -> Scene:
-    """`scene` with the free parameters set to `values` (SceneError if impossible). A fixed
-    breakaway friction below a free Coulomb friction rises with it (Fs >= Fc)."""
+    """`scene` with the free parameters set to `values` (SceneError if impossible)."""
     overrides = {}
     for p, v in zip(free, values):
         key = p.field + (f".{p.name}" if p.name else "")
@@ -123,13 +122,20 @@ def with_values(scene: Scene, free, values) -> Scene:
         pair = overrides.get(key) or list(_pair(scene, p))
         pair[p.index] = float(v)
         overrides[key] = pair
-    friction = scene.friction
-    if "friction.coulomb" in overrides and friction and "static" in friction \
-            and "friction.static" not in overrides:
-        overrides["friction.static"] = [max(s, c) for s, c in
-                                        zip(friction["static"], overrides["friction.coulomb"])]
+    overrides = _breakaway(scene, overrides)
     return scene.replace(**{k: tuple(v) if isinstance(v, list) else v
                             for k, v in overrides.items()})
+
+
+def _breakaway(scene: Scene, overrides: dict) -> dict:
+    """Fs >= Fc: a breakaway friction below the Coulomb friction (fixed, or fitted and
+    passing it) acts as the Coulomb friction, so a fit can move either freely."""
+    friction = scene.friction or {}
+    coulomb = overrides.get("friction.coulomb", friction.get("coulomb"))
+    static = overrides.get("friction.static", friction.get("static"))
+    if coulomb is None or static is None:
+        return overrides
+    return overrides | {"friction.static": [max(s, c) for s, c in zip(static, coulomb)]}
 
 
 def _pair(scene: Scene, p: FreeParameter) -> tuple:

@@ -16,6 +16,7 @@ from .fit_problem import Problem, solve
 UNMOVED = 1e-9            # a column this small against the largest: the data ignore it
 LOOSE = 0.1               # a relative standard error above this is warned about
 CORRELATED = 0.995        # |correlation| above this: only a combination is identified
+MISFIT = 4.0              # χ² per residual above this (RMS > 2 σ): the model lacks something
 
 
 def uncertainty(jac: np.ndarray, residuals: np.ndarray, n: int) -> dict:
@@ -37,10 +38,14 @@ def uncertainty(jac: np.ndarray, residuals: np.ndarray, n: int) -> dict:
             "moved": moved[:n]}
 
 
-def warnings_for(problem: Problem, values, se, correlation, moved, runs, names) -> list[str]:
-    """One line per parameter the recording does not identify, and per pair it cannot tell
-    apart."""
+def warnings_for(problem: Problem, values, se, correlation, moved, runs, names,
+                 chi2: float) -> list[str]:
+    """One line per parameter the recording does not identify, per pair it cannot tell
+    apart, and one if the best fit still misses the recording by more than its noise."""
     lines = []
+    if chi2 > MISFIT:
+        lines.append(f"the fitted simulation misses the recording by {chi2 ** 0.5:.3g} x its "
+                     "noise (RMS): the base scene lacks something the arm has; free more keys")
     for i, p in enumerate(problem.free):
         joint = names[p.index] if p.index is not None else "either joint"
         if p.field == "friction" and p.name == "static" and not stuck(runs, p.index):
