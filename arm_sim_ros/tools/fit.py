@@ -29,7 +29,7 @@ from .fit_keys import check_free, parse_free, with_values
 from .fit_problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, starts
 from .fit_stats import uncertainty, validate, warnings_for
 
-DEFAULT_STARTS = 3
+DEFAULT_STARTS = 2          # the base scene's values and one spread start; more: --starts
 DEFAULT_EVALUATIONS = 60     # least-squares iterations of one start before it gives up
 
 

@@ -106,7 +106,7 @@ def footnote(outcome) -> str:
     if v is not None:
         lines.append(f"validation, last {v['seconds']:.3g} s held out: RMS = "
                      + ", ".join(f"{m:.2f}" for m in v["noise_multiple"])
-                     + " x the noise (q1, q2, q̇1, q̇2)")
+                     + " x the noise (q1, q2, qd1, qd2)")
     lines += [f"warning: {w}" for w in outcome["warnings"]]
     return "\n".join(line if len(line) < 110 else line[:107] + "..." for line in lines)
 
