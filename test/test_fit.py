@@ -199,3 +199,25 @@ def test_a_fit_that_does_not_converge_says_so_with_its_best_point(capsys, short_
                "--starts", "1", "--workers", "1", "--max-evaluations", "1", code=1)
     assert line.startswith("arm-sim: error: the fit did not converge in 1 evaluations")
     assert "best point: payload.mass = " in line
+
+
+def test_a_sqlite3_bag_and_a_csv_read_as_the_mcap_bag_does(tmp_path, short_bag):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from arm_sim_ros.recording.bag import TYPESTORE
+    from arm_sim_ros.tools.fit_data import read_recording
+
+    rec = recording(1.0)[0]
+    with Writer(tmp_path / "sqlite", version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        topic = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState",
+                                      typestore=TYPESTORE)
+        for t, q, qd, tau in zip(rec.t, rec.q, rec.qd, rec.tau):
+            ns = round(t * 1e9)
+            writer.write(topic, ns, TYPESTORE.serialize_cdr(
+                joint_state(ns, q, qd, tau), "sensor_msgs/msg/JointState"))
+    rows = np.column_stack([rec.t, rec.q, rec.qd, rec.tau]).tolist()
+    sources = [short_bag, str(tmp_path / "sqlite"), csv_file(tmp_path / "r.csv", rows)]
+    for other in (read_recording(path, JOINT_NAMES) for path in sources):
+        for name in ("q", "qd", "tau"):
+            assert np.array_equal(getattr(other, name), getattr(rec, name))
+        assert np.allclose(other.t, rec.t, atol=1e-9)

@@ -73,9 +73,9 @@ def cmd_fit(args) -> int:
             raise FitError(f"--{name.replace('_', '-')} must be at least {low}")
     if not (args.segment > 0 and 0 <= args.validation < 0.9):
         raise FitError("--segment must be positive seconds and --validation a fraction below 0.9")
-    outputs = [check_output(path, option, args.force, suffixes=suffixes) for path, option, suffixes
-               in ((args.output, "-o", (".yaml", ".yml")), (args.report, "--report", (".png", ".rrd")))
-               if path is not None]
+    wanted = ((args.output, "-o", (".yaml", ".yml")), (args.report, "--report", (".png", ".rrd")))
+    outputs = [check_output(path, option, args.force, suffixes=suffixes)
+               for path, option, suffixes in wanted if path is not None]
     base = scene_from_args(args)
     free = parse_free(args.free, base)
     check_free(base, free)
@@ -153,7 +153,8 @@ def summarise(problem: Problem, results, names) -> dict:
     return {
         "converged": r["status"] > 0,
         "parameters": [{"key": p.key, "value": float(v), "se": float(s), "unit": p.unit,
-                        "start": float(s0)} for p, v, s, s0 in zip(problem.free, values, se, start)],
+                        "start": float(s0)}
+                       for p, v, s, s0 in zip(problem.free, values, se, start)],
         "correlation": stats["correlation"].tolist(),
         "warnings": warnings,
         "training": {"rms": np.sqrt(np.mean(errors ** 2, axis=0)).tolist(),
@@ -209,10 +210,11 @@ def scene_yaml(scene: Scene, outcome: dict, sources) -> str:
 
 def describe(problem: Problem, outcome: dict, names) -> str:
     """The outcome for a person."""
-    recs = problem.recordings
+    recs, first = problem.recordings, problem.training[0]
     lines = [f"fit of {len(problem.free)} parameter(s) to {len(recs)} recording(s), "
              f"{sum(len(r) for r in recs)} samples at {1 / recs[0].dt:.4g} Hz; "
-             f"{len(problem.training)} segments of {problem.recordings[0].dt * (problem.training[0].stop - problem.training[0].start - 1):.3g} s; "
+             f"{len(problem.training)} segments of "
+             f"{recs[first.recording].dt * (first.stop - first.start - 1):.3g} s; "
              f"best of {len(outcome['starts'])} starts, {outcome['seconds']:.1f} s"]
     width = max(len(p["key"]) for p in outcome["parameters"])
     for p in outcome["parameters"]:
@@ -220,14 +222,16 @@ def describe(problem: Problem, outcome: dict, names) -> str:
                      f"   (start {p['start']:.4g})")
     if len(problem.free) > 1:
         corr = np.array(outcome["correlation"])
-        pairs = [(abs(corr[i, j]), i, j) for i in range(len(corr)) for j in range(i + 1, len(corr))]
-        c, i, j = max(pairs)
+        pairs = [(abs(np.nan_to_num(corr[i, j])), i, j)
+                 for i in range(len(corr)) for j in range(i + 1, len(corr))]
+        _, i, j = max(pairs)
         lines.append(f"largest correlation: {problem.free[i].key} ~ {problem.free[j].key} "
                      f"{corr[i, j]:+.3f}")
     noise = np.mean(outcome["noise"], axis=0)
     t = outcome["training"]["rms"]
-    lines.append(f"training RMS error: q {t[0]:.3g}, {t[1]:.3g} rad; qd {t[2]:.3g}, {t[3]:.3g} rad/s "
-                 f"(noise {noise[0]:.2g}, {noise[1]:.2g} rad; {noise[2]:.2g}, {noise[3]:.2g} rad/s)")
+    lines.append(f"training RMS error: q {t[0]:.3g}, {t[1]:.3g} rad; qd {t[2]:.3g}, "
+                 f"{t[3]:.3g} rad/s (noise {noise[0]:.2g}, {noise[1]:.2g} rad; "
+                 f"{noise[2]:.2g}, {noise[3]:.2g} rad/s)")
     v = outcome["validation"]
     if v is not None:
         lines.append(f"validation ({v['seconds']:.3g} s held out): q {v['rms'][0]:.3g}, "

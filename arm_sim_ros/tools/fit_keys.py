@@ -85,7 +85,8 @@ def _parameters(key: str, scene: Scene) -> list[FreeParameter]:
             raise FitError(f"--free {key}: not a physical parameter a recording identifies; "
                            f"top-level keys that are: {', '.join(FIELDS)}")
         unit, check = FIELDS[field]
-        per_joint = FIELD_KINDS[field] == "pair" or isinstance(scene.damping, tuple) and field == "damping"
+        per_joint = FIELD_KINDS[field] == "pair" or (field == "damping"
+                                                     and isinstance(scene.damping, tuple))
     else:
         effect = MAPPING_EFFECTS.get(field)
         known = {p.name: p for p in effect.parameters} if effect else {}

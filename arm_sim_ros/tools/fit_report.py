@@ -2,24 +2,21 @@
 segment simulated from its fitted start state, the held-out validation shaded), the
 residuals in units of the noise, the parameter table with ± and units, and the cost over
 the iterations of every start. As a PNG (matplotlib) or a Rerun recording (.rrd) with the
-recordings' colours and series names (recording/blueprint.py), on the `sim_time` timeline
-(the cost on its own `iteration` timeline). The first recording is drawn.
+recordings' colours (recording/fit_rrd.py). The first recording is drawn.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..recording.blueprint import JOINT_COLORS, TIMELINE
-
-MEASURED = (150, 150, 150)
-CHANNELS = (("q1", "shoulder angle", "rad"), ("q2", "elbow angle", "rad"),
-            ("qd1", "shoulder velocity", "rad/s"), ("qd2", "elbow velocity", "rad/s"))
+from ..recording.fit_rrd import CHANNELS
 
 
 def write_report(path, problem, outcome, names) -> None:
     series = traces(problem, outcome)
     if str(path).lower().endswith(".rrd"):
-        write_rrd(path, series, outcome, names)
+        from ..recording.fit_rrd import write_rrd
+        write_rrd(path, series, outcome["cost_history"], table_rows(outcome), footnote(outcome),
+                  names)
     else:
         write_png(path, series, outcome, names)
 
@@ -119,48 +116,3 @@ def _decorate(ax, s, title) -> None:
         ax.axvline(start, color="0.8", lw=0.5, zorder=0)
     ax.set_xlabel("t (s)")
     ax.grid(alpha=0.3)
-
-
-def write_rrd(path, s, outcome, names) -> None:
-    import rerun as rr
-    import rerun.blueprint as rrb
-
-    from ..recording.columns import scalars
-
-    stream = rr.RecordingStream("arm_sim_fit")
-    index = [rr.TimeColumn(TIMELINE, duration=s["t"])]
-    views = []
-    for k, (short, title, unit) in enumerate(CHANNELS):
-        joint = k % 2
-        path_k = f"fit/{short}"
-        stream.log(path_k, rr.SeriesLines(names=["measured", "fitted"], widths=[1.0, 2.0],
-                                          colors=[MEASURED, JOINT_COLORS[joint]]), static=True)
-        stream.send_columns(path_k, indexes=index, columns=scalars(
-            np.column_stack([s["measured"][:, k], s["fitted"][:, k]])))
-        views.append(rrb.TimeSeriesView(name=f"{names[joint]}: {title} ({unit})", origin=path_k))
-    residual = (s["fitted"] - s["measured"]) / s["sigma"]
-    stream.log("fit/residual", rr.SeriesLines(
-        names=[f"{c[0]} / sigma" for c in CHANNELS], colors=[
-            JOINT_COLORS[0], JOINT_COLORS[1], (40, 130, 255), (255, 110, 40)]), static=True)
-    stream.send_columns("fit/residual", indexes=index, columns=scalars(residual))
-    history = np.asarray(outcome["cost_history"])
-    stream.log("fit/cost", rr.SeriesLines(names=["cost"], colors=[(110, 230, 110)]), static=True)
-    stream.send_columns("fit/cost", indexes=[rr.TimeColumn("iteration", sequence=np.arange(
-        len(history)))], columns=scalars(history))
-    header = "| key | value | ± 1 s.e. | unit | start |\n|---|---|---|---|---|\n"
-    text = header + "".join(f"| {' | '.join(row)} |\n" for row in table_rows(outcome))
-    stream.log("fit/parameters", rr.TextDocument(text + "\n" + footnote(outcome).replace(
-        "\n", "\n\n"), media_type=rr.MediaType.MARKDOWN), static=True)
-    blueprint = rrb.Blueprint(
-        rrb.Vertical(rrb.Grid(*views, grid_columns=2),
-                     rrb.Horizontal(rrb.TimeSeriesView(name="Residual (units of the noise)",
-                                                       origin="fit/residual"),
-                                    rrb.TimeSeriesView(name="Cost over iterations",
-                                                       origin="fit/cost"),
-                                    rrb.TextDocumentView(name="Parameters", origin="fit/parameters")),
-                     row_shares=[3, 1]),
-        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
-        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
-    stream.save(str(path), default_blueprint=blueprint)
-    stream.flush()
-    stream.disconnect()
