@@ -1,6 +1,6 @@
 """The Rerun recording of an `arm-sim fit` report (tools/fit_report.py draws the same as a
 PNG): per joint the measured and fitted angle and velocity on the `sim_time` timeline, the
-residuals in units of the noise, the cost on its own `iteration` timeline and the parameter
+residuals in units of the noise, the cost over the iterations as bars (log10) and the parameter
 table as a document; the joints' colours and the collapsed panels of the run recordings
 (blueprint.py).
 """
@@ -27,7 +27,7 @@ def write_rrd(path, s, history, rows, footnote: str, names) -> None:
     for k, (short, title, unit) in enumerate(CHANNELS):
         joint = k % 2
         path_k = f"fit/{short}"
-        stream.log(path_k, rr.SeriesLines(names=["measured", "fitted"], widths=[1.0, 2.0],
+        stream.log(path_k, rr.SeriesLines(names=["measured", "fitted"], widths=[4.0, 1.5],
                                           colors=[MEASURED, JOINT_COLORS[joint]]), static=True)
         stream.send_columns(path_k, indexes=index, columns=scalars(
             np.column_stack([s["measured"][:, k], s["fitted"][:, k]])))
@@ -37,10 +37,8 @@ def write_rrd(path, s, history, rows, footnote: str, names) -> None:
         names=[f"{c[0]} / sigma" for c in CHANNELS], colors=[
             JOINT_COLORS[0], JOINT_COLORS[1], (40, 130, 255), (255, 110, 40)]), static=True)
     stream.send_columns("fit/residual", indexes=index, columns=scalars(residual))
-    history = np.asarray(history)
-    stream.log("fit/cost", rr.SeriesLines(names=["cost"], colors=[(110, 230, 110)]), static=True)
-    stream.send_columns("fit/cost", indexes=[rr.TimeColumn("iteration", sequence=np.arange(
-        len(history)))], columns=scalars(history))
+    # The cost spans decades and has no place on sim_time: a bar per iteration, log10.
+    stream.log("fit/cost", rr.BarChart(np.log10(np.maximum(history, 1e-300))), static=True)
     header = "| key | value | ± 1 s.e. | unit | start |\n|---|---|---|---|---|\n"
     text = header + "".join(f"| {' | '.join(row)} |\n" for row in rows)
     stream.log("fit/parameters", rr.TextDocument(text + "\n" + footnote.replace(
@@ -49,8 +47,8 @@ def write_rrd(path, s, history, rows, footnote: str, names) -> None:
         rrb.Vertical(rrb.Grid(*views, grid_columns=2),
                      rrb.Horizontal(rrb.TimeSeriesView(name="Residual (units of the noise)",
                                                        origin="fit/residual"),
-                                    rrb.TimeSeriesView(name="Cost over iterations",
-                                                       origin="fit/cost"),
+                                    rrb.BarChartView(name="log10 cost over iterations",
+                                                     origin="fit/cost"),
                                     rrb.TextDocumentView(name="Parameters", origin="fit/parameters")),
                      row_shares=[3, 1]),
         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
