@@ -221,3 +221,16 @@ def test_a_sqlite3_bag_and_a_csv_read_as_the_mcap_bag_does(tmp_path, short_bag):
         for name in ("q", "qd", "tau"):
             assert np.array_equal(getattr(other, name), getattr(rec, name))
         assert np.allclose(other.t, rec.t, atol=1e-9)
+
+
+def test_several_recordings_are_fitted_alone_in_parallel_then_together(capsys, short_bag,
+                                                                         tmp_path):
+    other = write_bag(tmp_path / "other", recording(1.0, seed=11)[0])
+    outcome = fit(capsys, short_bag, other, *base_args(payload__mass="1.0"), "--free",
+                  "payload.mass", "--starts", "1", "--workers", "2", "--segment", "0.5")
+    alone = [r["values"][0] for r in outcome["recordings"]]
+    together = outcome["parameters"][0]
+    assert len(alone) == 2 and alone[0] != alone[1]
+    for value in alone + [together["value"]]:
+        assert value == pytest.approx(0.5, rel=0.01)
+    assert outcome["training"]["segments"] == 4 and outcome["converged"]

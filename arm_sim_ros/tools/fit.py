@@ -6,7 +6,9 @@ shooting, fit_problem.py), from several starts run in parallel on local processe
 (--workers) or a Dask cluster (--scheduler); uncertainties, what the data do not excite
 and the held-out validation error follow (fit_stats.py); the fitted scene is written as a
 YAML that `arm-sim run --scene` takes, the report as a PNG or a Rerun recording
-(fit_report.py). Several BAGs make one fit: one set of parameters for every recording.
+(fit_report.py). Several BAGs make one fit, one set of parameters for every recording:
+each is first fitted alone (all starts of all recordings in parallel), then all together
+from the median of those fits; the text and --json give each recording's own values too.
 
 Exit codes: 0 fitted, 1 the fit did not converge (one line with the best point found),
 2 bad input (one line).
@@ -83,12 +85,25 @@ def cmd_fit(args) -> int:
     if len(names) != 2 or not all(names):
         raise FitError(f"--joint-names {args.joint_names!r}: two names, shoulder first")
     recordings = [read_recording(path, names, args.torque_topic) for path in args.bags]
-    problem = Problem(base, free, recordings, "commands" if args.torque_topic else "effort",
-                      args.segment, args.validation)
+    mode = "commands" if args.torque_topic else "effort"
+    problem = Problem(base, free, recordings, mode, args.segment, args.validation)
     points = starts(len(free), args.starts)
-    results = run_tasks(fit_from, [(problem, x0, args.max_evaluations) for x0 in points],
+    # Every start on every recording alone, in parallel; several recordings are then
+    # fitted together from the median of their own fits (one more start, near the optimum).
+    alone = [problem] if len(recordings) == 1 else [
+        Problem(base, free, [r], mode, args.segment, args.validation) for r in recordings]
+    results = run_tasks(fit_from, [(p, x0, args.max_evaluations) for p in alone for x0 in points],
                         args.workers, args.scheduler)
+    per_recording = [min(results[k * len(points):(k + 1) * len(points)], key=lambda r: r["cost"])
+                     for k in range(len(alone))]
+    if len(recordings) > 1:
+        joint = np.median([r["xp"] for r in per_recording], axis=0)
+        results = [fit_from(problem, joint, args.max_evaluations)]
     outcome = summarise(problem, results, names)
+    outcome["start_count"] = len(points)
+    outcome["recordings"] = [{"source": r.source, "values": problem.values(best["xp"]).tolist(),
+                              "converged": best["status"] > 0}
+                             for r, best in zip(recordings, per_recording)]
     outcome["seconds"] = time.perf_counter() - started
     if not outcome["converged"]:
         best = ", ".join(f"{p['key']} = {p['value']:.6g}" for p in outcome["parameters"])
@@ -215,7 +230,9 @@ def describe(problem: Problem, outcome: dict, names) -> str:
              f"{sum(len(r) for r in recs)} samples at {1 / recs[0].dt:.4g} Hz; "
              f"{len(problem.training)} segments of "
              f"{recs[first.recording].dt * (first.stop - first.start - 1):.3g} s; "
-             f"best of {len(outcome['starts'])} starts, {outcome['seconds']:.1f} s"]
+             f"best of {outcome['start_count']} starts"
+             + (" on each alone, then all together" if len(recs) > 1 else "")
+             + f", {outcome['seconds']:.1f} s"]
     width = max(len(p["key"]) for p in outcome["parameters"])
     for p in outcome["parameters"]:
         lines.append(f"  {p['key']:{width}s} = {p['value']:.6g} ± {p['se']:.2g} {p['unit']}"
@@ -237,6 +254,10 @@ def describe(problem: Problem, outcome: dict, names) -> str:
         lines.append(f"validation ({v['seconds']:.3g} s held out): q {v['rms'][0]:.3g}, "
                      f"{v['rms'][1]:.3g} rad; qd {v['rms'][2]:.3g}, {v['rms'][3]:.3g} rad/s = "
                      + ", ".join(f"{m:.2f}" for m in v["noise_multiple"]) + " x the noise")
+    if len(outcome["recordings"]) > 1:
+        lines += [f"alone, {r['source']}: " + ", ".join(
+            f"{p.key} = {v:.6g}" for p, v in zip(problem.free, r["values"]))
+            for r in outcome["recordings"]]
     lines += [f"warning: {w}" for w in outcome["warnings"]]
     if outcome.get("scene"):
         lines.append(f"wrote {outcome['scene']}")

@@ -76,7 +76,7 @@ def write_png(path, s, outcome, names) -> None:
     ax = fig.add_subplot(grid[3, 0])
     history = np.asarray(outcome["cost_history"])
     ax.semilogy(np.arange(len(history)), history, "o-", ms=3, color="tab:green")
-    ax.set_title(f"cost over iterations (best of {len(outcome['starts'])} starts; "
+    ax.set_title(f"cost over iterations (best of {outcome['start_count']} starts; "
                  f"χ² per residual at the end {outcome['training']['chi2_per_residual']:.3f})",
                  fontsize=10)
     ax.set_xlabel("iteration")
