@@ -40,6 +40,7 @@ setup(
     extras_require={
         "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
         "bench": ["mujoco==4.0.0"],
+        "fit": ["dask==2026.8.0", "distributed==2026.8.0"],   # arm-sim fit --scheduler
     },
     zip_safe=True,
     maintainer="arm_sim_ros developers",

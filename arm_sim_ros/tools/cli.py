@@ -28,6 +28,8 @@ SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
                       "arm_sim_ros.tools.inspect",      # inspect
                       "arm_sim_ros.tools.record",       # record
                       "arm_sim_ros.tools.urdf",         # urdf
+                      "arm_sim_ros.tools.fit",          # fit
+                      "arm_sim_ros.tools.fit_excitation",  # excite
                       "arm_sim_ros.tools.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:
