@@ -95,7 +95,8 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
-        "float_pair" if parameter.kind == "pair" else "float", _effect_value(effect, key),
+        {"pair": "float_pair", "names": "str_list"}.get(parameter.kind, "float"),
+        _effect_value(effect, key),
         f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
         when=START if effect in START_ONLY_WHY else KEPT)
 
