@@ -184,7 +184,7 @@ class FirstPrinciples:
             e = (self.targets[0][j] - q[j] if kind == "position" else
                  self.targets[1][j] - u[j] if kind == "velocity" else None)
             wc = min(max(w[j], -limit[j]), limit[j])
-            rates.append(0.0 if e is None else
+            rates.append(0.0 if e is None or ki == 0.0 else
                          ki * e + b * (tau[j] - tau_request[j]) + b * (wc - w[j]))
         return rates
 

@@ -18,7 +18,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from .. import messages as msg
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
@@ -69,8 +69,11 @@ class DdsArmSimNode:
         self.command_reader = self._reader(topic(COMMAND_TOPIC), msg.Float64MultiArray)
         self.joint_command_reader = self._reader(topic(values["joint_commands_topic"]),
                                                  msg.JointState)
+        self.setpoint_readers = {field: self._reader(topic(name), msg.Float64MultiArray)
+                                 for field, name in SETPOINT_TOPICS.items()}
         self._command_ready = WaitSet(self.participant)
-        for reader in (self.command_reader, self.joint_command_reader):
+        for reader in (self.command_reader, self.joint_command_reader,
+                       *self.setpoint_readers.values()):
             self._command_ready.attach(ReadCondition(
                 reader, SampleState.Any | ViewState.Any | InstanceState.Any))
         # rcl_interfaces parameter services, ~/reset, /parameter_events
@@ -99,6 +102,7 @@ class DdsArmSimNode:
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
             reader_gid_seq=[msg.gid(self.command_reader), msg.gid(self.joint_command_reader)]
+            + [msg.gid(r) for r in self.setpoint_readers.values()]
             + [msg.gid(r) for r in self.services.readers],   # service requests
             writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer),
                             msg.gid(self.clock_writer)]
@@ -118,6 +122,11 @@ class DdsArmSimNode:
             if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
                 self.core.on_command(sample.data)
                 count += 1
+        for field, reader in self.setpoint_readers.items():
+            for sample in reader.take(N=256):
+                if isinstance(sample, msg.Float64MultiArray):
+                    self.core.on_setpoint_command(field, sample.data)
+                    count += 1
         for sample in self.joint_command_reader.take(N=256):
             if isinstance(sample, msg.JointState):
                 self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
@@ -189,4 +198,5 @@ class DdsArmSimNode:
         self.services.close()
         self._command_ready = self.command_reader = self.discovery_writer = None
         self.joint_command_reader = self.clock_writer = self.name_watch = None
+        self.setpoint_readers = {}
         self.joint_state_writer = self.diagnostics_writer = self.participant = None

@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused, resolve_parameters,
@@ -81,6 +81,11 @@ class ArmSimNode(Node):
             Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
         self.joint_command_subscription = self.create_subscription(
             JointState, values["joint_commands_topic"], self.on_joint_command, 10)
+        self.setpoint_subscriptions = [
+            self.create_subscription(Float64MultiArray, name,
+                                     lambda message, field=field: self.on_setpoint(field, message),
+                                     10)
+            for field, name in SETPOINT_TOPICS.items()]
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
         self.schedule = TickSchedule(self.core.wall_clock())
         self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
@@ -88,6 +93,10 @@ class ArmSimNode(Node):
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
+        self._publish_lockstep()
+
+    def on_setpoint(self, field: str, message: Float64MultiArray) -> None:
+        self.core.on_setpoint_command(field, list(message.data))
         self._publish_lockstep()
 
     def on_joint_command(self, message: JointState) -> None:

@@ -112,8 +112,10 @@ class Servo(Actuator):
         return lines
 
     def rates(self) -> list[str]:
+        # no integral action (ki = 0, an effort joint): the integral stays where it is
         return [f"KI{j} * e{j} + KB{j} * (ts{j} - r{j} + wc{j} - integral{j})"
-                if self.interface[j - 1] != "effort" else "0.0" for j in (1, 2)]
+                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 else "0.0"
+                for j in (1, 2)]
 
     def stiffness(self, arm) -> float:
         # Velocity feedback (kd on a position joint, kp on a velocity joint) is a damper;
@@ -160,7 +162,7 @@ class Servo(Actuator):
         for i, kind in enumerate(self.interface):
             rest = (self.kd[i] * (self.setpoint[2 + i] - u[i]) if kind == "position" else
                     self.kp[i] * (self.setpoint[2 + i] - u[i]) if kind == "velocity" else None)
-            if rest is None:
+            if rest is None or self.ki[i] == 0.0:      # no integral action to carry it
                 integrals.append(0.0)
                 continue
             w = torque[i] - g[i] - rest - (self.kp[i] * (self.setpoint[i] - q[i])
@@ -198,3 +200,28 @@ def change_scene(sim, scene) -> None:
             new.command[i] = new.setpoint[4 + i] = torque[i] - g[i]
         state[sim.state_names.index(f"integral{i + 1}")] = integrals[i]
     sim.state = tuple(state)
+
+
+def interfaces(dynamics) -> tuple:
+    """What each joint is commanded in: its servo's interface, else effort."""
+    joint_servo = servo_of(dynamics)
+    return joint_servo.interface if joint_servo is not None else ("effort", "effort")
+
+
+def set_points(dynamics, setpoints: dict) -> None:
+    """{(field, joint): value} into the servo's set-points (field position or velocity); a
+    position without a velocity targets rest."""
+    joint_servo = servo_of(dynamics)
+    for (field, joint), value in setpoints.items():
+        if field == "position":
+            joint_servo.setpoint[joint] = value
+            joint_servo.setpoint[2 + joint] = setpoints.get(("velocity", joint), 0.0)
+        else:
+            joint_servo.setpoint[2 + joint] = value
+
+
+def hold(dynamics, state) -> None:
+    """A command timed out: position joints hold where they are, velocity joints stop."""
+    joint_servo = servo_of(dynamics)
+    if joint_servo is not None:
+        joint_servo.hold(state[0:2], [i for i in (0, 1) if joint_servo.interface[i] != "effort"])
