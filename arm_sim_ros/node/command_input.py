@@ -31,6 +31,6 @@ class CommandInput:
             self.recorder.refused(reason)
         elif command is not None or setpoints:
             self._set_command(*self.commands.value, setpoints)
-            if self.config.values["lockstep"]:     # one tick per command, under that command
+            if self.config.values["lockstep"] and not self.paused:   # a tick per command
                 self.lockstep_states.append(self._tick())
         return reason

@@ -35,6 +35,7 @@ class ArmSimCore(CommandInput):
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
         self.lockstep_states = []         # JointStates of lockstep ticks not yet published
+        self.paused = False               # no physics; the held state is published (simulation.py)
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
@@ -115,10 +116,17 @@ class ArmSimCore(CommandInput):
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
         lockstep, where each command ticks instead (lockstep_states holds their JointStates
-        until the transport publishes them)."""
+        until the transport publishes them). Paused: the held state, time standing still."""
+        if self.paused:
+            return self.joint_state()
         if self.config.values["lockstep"]:
             return None
         return self._tick(wall_now)
+
+    def step_ticks(self, count: int) -> list:
+        """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""
+        self._last_tick_wall = None       # asked for: not late
+        return [self._tick() for _ in range(count)]
 
     def take_lockstep_states(self) -> list:
         states, self.lockstep_states = self.lockstep_states, []

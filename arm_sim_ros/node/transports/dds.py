@@ -24,6 +24,7 @@ from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
 from ..ros_args import remap_name
 from ..schedule import TickSchedule
+from ..simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
 
@@ -82,7 +83,9 @@ class DdsArmSimNode:
         self._announce()
         self.name_watch = NameWatch(self.participant, namespace, name, self.log)
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
-        self.services.attach(self.core)
+        self.simulation = SimulationControl(self.core, self._publish)
+        self.services.attach(self.core, self.simulation)
+        self._publish_clock()      # use_sim_time nodes (controller_manager) wait for a first one
 
     def _reader(self, topic_name: str, message_type) -> DataReader:
         return DataReader(self.participant, Topic(self.participant, topic_name, message_type),
@@ -151,6 +154,11 @@ class DdsArmSimNode:
         if self.core.config.values["publish_clock"]:
             self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
 
+    def _publish_clock(self) -> None:
+        """The current time on /clock: at start, and while lockstep waits for a command."""
+        if self.core.config.values["publish_clock"]:
+            self.clock_writer.write(msg.Clock(_stamp(self.core.stamp_ns())))
+
     def publish_diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         data = self.core.diagnostics(wall_now)
         self.diagnostics_writer.write(to_diagnostic_array(data))
@@ -169,9 +177,10 @@ class DdsArmSimNode:
         next_status = schedule.next_tick + 1.0
         while end_ns is None or self.core.stamp_ns() - self.core.start_stamp_ns < end_ns:
             now = self.wall_clock()
-            if self.core.config.values["lockstep"]:    # commands tick: wait for them
-                self.services.poll()
-                self.take_commands(timeout=LOCKSTEP_WAIT)
+            if self.core.config.values["lockstep"] and not self.core.paused:
+                self.services.poll()                   # commands tick: wait for them
+                if not self.take_commands(timeout=LOCKSTEP_WAIT):
+                    self._publish_clock()              # the time, while nobody commands
             else:
                 if schedule.wait(now) > 0:
                     self.services.serve_for(schedule.wait(now))   # sleep, serving
