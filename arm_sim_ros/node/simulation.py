@@ -39,9 +39,11 @@ SERVICES = ("get_simulator_features", "get_simulation_state", "set_simulation_st
 class SimulationControl:
     """Play, pause, stop, step and reset a node core, as the Simulation Interfaces ask."""
 
-    def __init__(self, core, publish):
-        """`publish(JointStateData)`: the transport's JointState and /clock publisher."""
-        self.core, self.publish = core, publish
+    def __init__(self, core, publish, take_commands=None):
+        """`publish(JointStateData)`: the transport's JointState and /clock publisher;
+        `take_commands()`: hands the commands waiting to the core, so that a command sent
+        (and acknowledged) before a step request acts in the steps: deterministic."""
+        self.core, self.publish, self.take_commands = core, publish, take_commands
         self.state = STATE_PLAYING
 
     def features(self) -> tuple:
@@ -68,6 +70,8 @@ class SimulationControl:
         if steps > MAX_STEPS:
             return RESULT_OPERATION_FAILED, f"{steps} steps is beyond {MAX_STEPS} in one call"
         self.state = STATE_PAUSED
+        if self.take_commands is not None:
+            self.take_commands()
         for data in self.core.step_ticks(steps):
             self.publish(data)
         return RESULT_OK, ""

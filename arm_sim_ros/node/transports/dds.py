@@ -83,7 +83,7 @@ class DdsArmSimNode:
         self._announce()
         self.name_watch = NameWatch(self.participant, namespace, name, self.log)
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
-        self.simulation = SimulationControl(self.core, self._publish)
+        self.simulation = SimulationControl(self.core, self._publish, self.take_commands)
         self.services.attach(self.core, self.simulation)
         self._publish_clock()      # use_sim_time nodes (controller_manager) wait for a first one
 
