@@ -34,14 +34,22 @@ class RateLimitedLog:
         self.log.warning(text + (f" ({held} more {kind} since the last warning)" if held else ""))
 
 
-def refusal(data, torque_limit: float) -> str | None:
-    """Why `data` is not a torque command [tau1, tau2] the node takes, or None."""
+def _pair(data, what: str):
+    """([value 1, value 2], None), or (None, why `data` is not two numbers)."""
     try:
         values = [float(v) for v in data]
     except (TypeError, ValueError):
-        return f"data {data!r} is not a list of numbers"
+        return None, f"data {data!r} is not a list of numbers"
     if len(values) != 2:
-        return f"data has {len(values)} values; expected 2 ([tau1, tau2] in N m)"
+        return None, f"data has {len(values)} values; expected 2 ({what})"
+    return values, None
+
+
+def refusal(data, torque_limit: float) -> str | None:
+    """Why `data` is not a torque command [tau1, tau2] the node takes, or None."""
+    values, why = _pair(data, "[tau1, tau2] in N m")
+    if why is not None:
+        return why
     for i, tau in enumerate(values):
         if not isfinite(tau):
             return f"tau{i + 1} = {tau} is not finite"
@@ -90,12 +98,9 @@ def _not_taken(joint: str, interface: str, field: str) -> str:
 def setpoint_refusal(field: str, data, interfaces, limit: float) -> str | None:
     """Why `data` is not a [joint 1, joint 2] `field` command, or None (NaN: not set)."""
     unit = "rad" if field == "position" else "rad/s"
-    try:
-        values = [float(v) for v in data]
-    except (TypeError, ValueError):
-        return f"data {data!r} is not a list of numbers"
-    if len(values) != 2:
-        return f"data has {len(values)} values; expected 2 ({field}s in {unit})"
+    values, why = _pair(data, f"{field}s in {unit}")
+    if why is not None:
+        return why
     for i, value in enumerate(values):
         if value != value:
             continue
