@@ -115,7 +115,7 @@ PARAMETERS = (
                   "masses, inertias, limits, damping, friction and joint names replace the "
                   "scene's (\"\" = the scene's arm)", when=START),
     _scene_spec("policy", "str", "torque policy: command, command_gravity_compensation, zero, "
-                "constant, gravity_compensation, frozen_gravity", _node_policy),
+                "constant, gravity_compensation, frozen_gravity, setpoint (servos)", _node_policy),
     _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
     _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
     _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)",
