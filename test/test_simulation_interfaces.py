@@ -3,8 +3,11 @@ client writes rmw_cyclonedds requests (as test_dds_services' clients do) and rea
 replies, the JointStates and /clock the node publishes."""
 from __future__ import annotations
 
+import logging
+import sys
 import threading
 import time
+import types
 
 import pytest
 from cyclonedds.pub import DataWriter
@@ -14,7 +17,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from arm_sim_ros.node import messages as msg
 from arm_sim_ros.node import simulation as s
+from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.parameters import resolve_parameters
 from arm_sim_ros.node.transports import dds_simulation as d
+from arm_sim_ros.node.transports import rclpy_simulation
 from arm_sim_ros.tools.sim_client import SimulationClient
 from test_dds_services import Client, start
 from test_node_dds import CONFIG, TIMEOUT, wait_until
@@ -199,3 +205,62 @@ def test_a_harness_run_is_deterministic_run_to_run():
     assert [list(m.position) for m in first] == [list(m.position) for m in second]
     assert [list(m.velocity) for m in first] == [list(m.velocity) for m in second]
     assert first[-1].position[0] > 0.6       # moving toward the commanded 0.8 rad
+
+
+class FakeNode:
+    """What rclpy_simulation.serve uses of an rclpy node: create_service and the logger."""
+
+    def __init__(self):
+        self.services, self.lines = {}, []
+
+    def create_service(self, kind, name, handler):
+        self.services[name] = (kind, handler)
+        return name
+
+    def get_logger(self):
+        return types.SimpleNamespace(info=self.lines.append)
+
+
+def fake_simulation_interfaces(monkeypatch):
+    """simulation_interfaces' Python types as rosidl makes them: keyword constructors and
+    the constants the handlers read."""
+    def message(name, **constants):
+        def init(self, **fields):
+            self.__dict__.update(fields)
+        return type(name, (), {"__init__": init, **constants})
+    package = types.ModuleType("simulation_interfaces")
+    package.msg = types.ModuleType("simulation_interfaces.msg")
+    package.srv = types.ModuleType("simulation_interfaces.srv")
+    package.msg.Result = message("Result", RESULT_OK=s.RESULT_OK)
+    package.msg.SimulationState = message("SimulationState")
+    package.msg.SimulatorFeatures = message("SimulatorFeatures")
+    for name, _, _ in d.TYPES.values():
+        setattr(package.srv, name, name)
+    for module in (package, package.msg, package.srv):
+        monkeypatch.setitem(sys.modules, module.__name__, module)
+
+
+def test_on_rclpy_the_same_services_are_served_when_the_package_imports(monkeypatch):
+    fake_simulation_interfaces(monkeypatch)
+    node, published = FakeNode(), []
+    core = ArmSimCore(resolve_parameters({"scene": "servo_hold"}), logging.getLogger("t"),
+                      wall_clock=lambda: 0.0, start_stamp_ns=0)
+    control = s.SimulationControl(core, published.append)
+    assert rclpy_simulation.serve(node, control) == list(s.SERVICES)
+    assert {name: kind for name, (kind, _) in node.services.items()} == {
+        service: name for service, (name, _, _) in d.TYPES.items()}
+    call = lambda name, **fields: node.services[name][1](  # noqa: E731
+        types.SimpleNamespace(**fields), types.SimpleNamespace())
+    assert sorted(call("get_simulator_features").features.features) == list(s.FEATURES)
+    paused = types.SimpleNamespace(state=s.STATE_PAUSED)
+    assert call("set_simulation_state", state=paused).result.result == s.RESULT_OK
+    assert call("step_simulation", steps=4).result.result == s.RESULT_OK and len(published) == 4
+    assert call("get_simulation_state").state.state == s.STATE_PAUSED
+    assert call("reset_simulation", scope=s.SCOPE_DEFAULT).result.result == s.RESULT_OK
+
+
+def test_on_rclpy_without_the_package_one_line_says_so(monkeypatch):
+    monkeypatch.setitem(sys.modules, "simulation_interfaces", None)    # import fails
+    node = FakeNode()
+    assert rclpy_simulation.serve(node, None) == []
+    assert len(node.lines) == 1 and "simulation_interfaces is not installed" in node.lines[0]
