@@ -7,6 +7,8 @@ NODE_NAME = "arm_sim"
 JOINT_STATES_TOPIC = "joint_states"
 COMMAND_TOPIC = "joint_torque_commands"
 JOINT_COMMANDS_TOPIC = "joint_commands"          # sensor_msgs/JointState efforts (ros2_control)
+# Float64MultiArray [joint 1, joint 2] set-points of the servos, by field they set
+SETPOINT_TOPICS = {"position": "position_commands", "velocity": "velocity_commands"}
 DIAGNOSTICS_TOPIC = "/diagnostics"
 JOINT_NAMES = ("shoulder_joint", "elbow_joint")   # as in urdf/two_link_arm.urdf
 

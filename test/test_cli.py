@@ -25,7 +25,7 @@ def run_cli(capsys, *argv):
 
 EFFECT_PRESETS = {"per_joint_damping", "springs_oscillation", "payload_release", "geared_release",
                   "motor_windings_hold", "effort_limited_hold", "wrong_payload_model", "geared_arm",
-                  "stick_slip", "limit_impact", "compliant_limit"}
+                  "stick_slip", "limit_impact", "compliant_limit", "servo_hold", "servo_reach"}
 
 
 def test_scenes_lists_the_explainers_seven_and_the_effect_presets_with_descriptions(capsys):

@@ -35,6 +35,8 @@ from arm_sim_ros.node.transports import dds_service_types as t
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from arm_sim_ros.node.transports.dds_services import (cs_id, endpoint_qos, from_value, to_value,
                                                       user_data_value)
+from arm_sim_ros.node.simulation import SERVICES as SIMULATION_SERVICES
+from arm_sim_ros.node.transports.dds_simulation import TYPE_HASHES as SIMULATION_HASHES
 from arm_sim_ros.physics.effects import MAPPING_EFFECTS
 from test_node_dds import CONFIG, TIMEOUT, start as start_node, wait_until
 
@@ -56,9 +58,10 @@ class Client:
     """A service client on rmw_cyclonedds' wire."""
     count = 0
 
-    def __init__(self, participant, service, node_name="/arm_sim", reply_reader=True):
+    def __init__(self, participant, service, node_name="/arm_sim", reply_reader=True,
+                 types=None):
         Client.count += 1
-        self.request_type, self.reply_type = SERVICES[service]
+        self.request_type, self.reply_type = types or SERVICES[service]
         self.user_data = f"clientid={cs_id(participant.guid.bytes, Client.count)};"
         p, name = participant, f"{node_name}/{service}"
         self.participant, self.name = p, name
@@ -400,15 +403,19 @@ def test_discovery_info_lists_every_service_endpoint_under_the_node():
         "rcl_interfaces::srv::dds_::GetParameters_Request_"
     assert requests["rq/arm_sim/resetRequest"].type_name == "std_srvs::srv::dds_::Trigger_Request_"
     assert replies["rt/parameter_events"].type_name == "rcl_interfaces::msg::dds_::ParameterEvent_"
+    for service in SIMULATION_SERVICES:       # under the namespace, not the node's name
+        hash_of = user_data_value(requests[f"rq/{service}Request"].qos, "typehash")
+        assert hash_of in SIMULATION_HASHES.values() and f"rr/{service}Reply" in replies
     assert len({user_data_value(s.qos, "serviceid") for s in requests.values()
-                if s.topic_name.startswith("rq/")}) == len(SERVICES)
+                if s.topic_name.startswith("rq/")}) == len(SERVICES) + len(SIMULATION_SERVICES)
 
 
 def test_service_names_follow_the_namespace():
     node = opened(DdsArmSimNode({}, domain_id=128, config=CONFIG, namespace="/robot"))
     assert node.services.node == "/robot/arm_sim"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
-        f"rq/robot/arm_sim/{s}Request" for s in SERVICES}
+        f"rq/robot/arm_sim/{s}Request" for s in SERVICES} | {
+        f"rq/robot/{s}Request" for s in SIMULATION_SERVICES}
 
 
 def remapped(domain_id, *rules):
@@ -424,7 +431,8 @@ def test_a_remapped_node_serves_its_parameters_and_reset_under_its_new_name():
     node, p = remapped(133, "__node:=other", "__ns:=/ns")
     assert node.services.node == "/ns/other"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
-        f"rq/ns/other/{s}Request" for s in SERVICES}
+        f"rq/ns/other/{s}Request" for s in SERVICES} | {
+        f"rq/ns/{s}Request" for s in SIMULATION_SERVICES}
     getter = Client(p, "get_parameters", node_name="/ns/other")
     reset = Client(p, "reset", node_name="/ns/other")
     for client in (getter, reset):

@@ -64,18 +64,23 @@ def test_compensating_absent_gravity_is_no_actuator():
 def test_generated_rhs_equals_model_forward_dynamics(policy, gravity, damping):
     arm = model.ArmParameters(link_lengths=(0.8, 1.2), link_masses=(1.5, 0.7), com_distances=(0.35, 0.6),
                               com_inertias=(0.04, 0.09))
+    # policy setpoint: servos on effort, holding the scene's setpoint torques
+    servo = ({"servo": {"interface": ["effort", "effort"], "kp": [0.0, 0.0]},
+              "setpoint": (0.7, -0.3)} if policy == "setpoint" else {})
     scene = Scene(gravity=gravity, damping=damping, policy=policy, constant_torque=(0.7, -0.3),
-                  initial_positions=(0.2, 0.1), **{name: getattr(arm, name) for name in model.PAIR_FIELDS})
+                  initial_positions=(0.2, 0.1), **servo,
+                  **{name: getattr(arm, name) for name in model.PAIR_FIELDS})
     built = dynamics.build_dynamics(scene)
+    extra = (0.0,) * len(built.extra)          # the servo's integrals (unused on effort)
     built.command[:] = [1.5, -2.5]
     rng = random.Random(7)
     for _ in range(20):
         q1, q2, u1, u2 = (rng.uniform(-3, 3) for _ in range(4))
         tau = built.applied_torque((q1, q2))
-        out = built.function(q1, q2, u1, u2)
+        out = built.function(q1, q2, u1, u2, *extra)
         expected = model.forward_dynamics(arm, (q1, q2), (u1, u2), tau, gravity, damping)
         assert out[:2] == pytest.approx(expected, rel=1e-12, abs=1e-12)
-        rates = dict(zip(built.channels, out[2:]))
+        rates = dict(zip(built.channels, out[2 + len(extra):]))
         if "work" in rates:
             assert rates["work"] == pytest.approx(tau[0] * u1 + tau[1] * u2, rel=1e-12, abs=1e-12)
         if "dissipated" in rates:

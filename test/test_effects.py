@@ -101,7 +101,13 @@ class FirstPrinciples:
                          pick("payload_mass", self.payload), pick("gravity", s.gravity))
         self.policy, self.constant, self.command = s.policy, s.constant_torque, command
         self.q0 = s.initial_positions
+        self.servo = s.servo
+        if s.servo:        # set-points [q*, q̇*, τ*]: the scene's (policy setpoint) or hold q0
+            self.targets = [list(s.initial_positions), [0.0, 0.0], [0.0, 0.0]]
+            for j, kind in enumerate(s.servo["interface"] if s.policy == "setpoint" else ()):
+                self.targets[("position", "velocity", "effort").index(kind)][j] = s.setpoint[j]
         self.y0 = ([*s.initial_positions, *s.initial_velocities]
+                   + [0.0] * (2 if self.servo else 0)
                    + [0.0] * (2 if self.windings else 0) + [0.0] * len(BOOKS))
         self.clamps = ([("effort", j) for j in (0, 1)] if self.effort else []) + (
             [("volts", j) for j in (0, 1)] if self.voltage_limit else [])
@@ -135,18 +141,52 @@ class FirstPrinciples:
             e += m * self.gravity * point_kinematics(self.lengths[0], link, s, q, u)[0][1]
         e += sum(0.5 * k * (qi - r) ** 2 for k, qi, r in zip(self.stiffness, q, self.rest))
         if self.windings:
-            e += sum(0.5 * l * i * i for l, i in zip(self.inductance, y[4:6]))
+            e += sum(0.5 * l * i * i for l, i in zip(self.inductance,
+                                                     y[-len(BOOKS) - 2:-len(BOOKS)]))
         return e
 
     # the drive chain: policy → effort clamp → driver (→ voltage clamp) → winding
-    def requested(self, q):
+    def requested(self, y):
+        q = y[0:2]
         compensation = lambda q: gravity_torque(*self.believed, q)
+        if self.servo:
+            return self.servo_request(y, compensation)
         return {"zero": lambda: (0.0, 0.0), "constant": lambda: self.constant,
                 "frozen_gravity": lambda: compensation(self.q0),
                 "gravity_compensation": lambda: compensation(q),
                 "command": lambda: self.command,
                 "command_gravity_compensation": lambda: tuple(
                     c + g for c, g in zip(self.command, compensation(q)))}[self.policy]()
+
+    def servo_request(self, y, compensation):
+        """The PID of each joint toward its set-point (effects/servo.py's equations)."""
+        s, (q, u, w) = self.servo, (y[0:2], y[2:4], y[4:6])
+        g = (compensation(q) if self.policy == "command_gravity_compensation"
+             else (0.0, 0.0))
+        limit = s.get("integral_limit") or (math.inf, math.inf)
+        r = []
+        for j, kind in enumerate(s["interface"]):
+            wc = min(max(w[j], -limit[j]), limit[j])
+            r.append(g[j] + (
+                s["kp"][j] * (self.targets[0][j] - q[j])
+                + s["kd"][j] * (self.targets[1][j] - u[j]) + wc if kind == "position" else
+                s["kp"][j] * (self.targets[1][j] - u[j]) + wc if kind == "velocity" else
+                self.targets[2][j] if self.policy == "setpoint" else self.command[j]))
+        return r
+
+    def servo_rates(self, y, tau_request, tau):
+        s, (q, u, w) = self.servo, (y[0:2], y[2:4], y[4:6])
+        limit = s.get("integral_limit") or (math.inf, math.inf)
+        rates = []
+        for j, kind in enumerate(s["interface"]):
+            ki, kp = s["ki"][j], s["kp"][j]
+            b = (s.get("tracking") or (None, None))[j] or (ki / kp if ki > 0 and kp > 0 else 1.0)
+            e = (self.targets[0][j] - q[j] if kind == "position" else
+                 self.targets[1][j] - u[j] if kind == "velocity" else None)
+            wc = min(max(w[j], -limit[j]), limit[j])
+            rates.append(0.0 if e is None or ki == 0.0 else
+                         ki * e + b * (tau[j] - tau_request[j]) + b * (wc - w[j]))
+        return rates
 
     def drive(self, q, modes, arguments=None):
         """(joint torque from the actuator without windings, winding voltages or None).
@@ -156,8 +196,10 @@ class FirstPrinciples:
                 arguments[key] = (x, limit)
             return x if modes.get(key, 0) == 0 else modes[key] * limit
         t = list(self.requested(q))
+        self.request = list(t)
         if self.effort:
             t = [clamp(("effort", j), t[j], self.effort[j]) for j in (0, 1)]
+        self.clamped = list(t)
         if not self.windings:
             return t, None
         v = [self.resistance[j] * t[j] / (self.gear[j] * self.torque_constant[j]) for j in (0, 1)]
@@ -168,12 +210,14 @@ class FirstPrinciples:
     def rhs(self, y, modes):
         q, u = y[0:2], y[2:4]
         (m11, m12, m22), (b1, b2) = self.mass_matrix_and_bias(q, u)
-        tau, volts = self.drive(q, modes)
+        tau, volts = self.drive(y, modes)
         rates, electrical, copper = [], 0.0, 0.0
+        if self.servo:
+            rates = self.servo_rates(y, self.request, self.clamped)
         if self.windings:
-            i = y[4:6]
+            i = y[-len(BOOKS) - 2:-len(BOOKS)]
             kn = [self.torque_constant[j] * self.gear[j] for j in (0, 1)]
-            rates = [(volts[j] - self.resistance[j] * i[j] - kn[j] * u[j]) / self.inductance[j]
+            rates += [(volts[j] - self.resistance[j] * i[j] - kn[j] * u[j]) / self.inductance[j]
                      for j in (0, 1)]
             tau = [kn[j] * i[j] for j in (0, 1)]
             electrical = volts[0] * i[0] + volts[1] * i[1]
@@ -189,7 +233,7 @@ class FirstPrinciples:
 
     def _arguments(self, y, modes):
         arguments = {}
-        self.drive(y[0:2], modes, arguments)
+        self.drive(y, modes, arguments)
         return arguments
 
     def _events(self, modes):
@@ -324,7 +368,7 @@ PRESET_EFFECTS = {
     "springs_oscillation": "springs", "payload_release": "payload",
     "geared_release": "motors", "motor_windings_hold": "motors",
     "effort_limited_hold": "effort_limits", "wrong_payload_model": "controller_model",
-    "geared_arm": "motors",
+    "geared_arm": "motors", "servo_hold": "servo", "servo_reach": "servo",
 }
 
 
@@ -359,6 +403,8 @@ COMBINED = {
                  | {"voltage_limit": [15.0, 5.0]}},
     "effort_limits": {"effort_limits": (12.0, 3.0)},
     "controller_model": {"controller_model": {"payload_mass": 0.1, "link_masses": [1.1, 0.9]}},
+    "servo": {"servo": {"interface": ["position", "velocity"], "kp": [60.0, 8.0],
+                        "ki": [40.0, 10.0], "kd": [6.0, 0.0], "integral_limit": [5.0, 2.0]}},
 }
 SUBSETS = [names for r in range(len(COMBINED) + 1) for names in itertools.combinations(COMBINED, r)]
 
@@ -390,7 +436,7 @@ def test_energy_books_carry_the_channels_each_effect_names():
     sim = Simulator(combined_scene(tuple(COMBINED)))
     assert set(sim.channels) == {"work", "electrical_input", "copper_loss", "dissipated",
                                  "payload_exchange"}
-    assert sim.extra == ("i1", "i2")
+    assert sim.extra == ("integral1", "integral2", "i1", "i2")
     kinds = dict(zip(sim.channels, sim.dynamics.channel_kinds))
     assert kinds == {"work": "transfer", "electrical_input": "input", "copper_loss": "loss",
                      "dissipated": "loss", "payload_exchange": "input"}

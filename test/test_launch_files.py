@@ -156,7 +156,9 @@ def test_rvizs_camera_looks_at_the_arms_plane_from_its_counter_clockwise_side(rv
     assert distance * math.tan(math.radians(22.5)) > 2.0 * 1.2
 
 
-def test_launch_description_builds_where_ros_is_installed(tmp_path, monkeypatch):
+def ament_share(tmp_path, monkeypatch):
+    """An ament prefix holding this source tree's files, as colcon would install them; skips
+    where launch cannot import."""
     # Importing launch swaps the logger class for one that does not propagate to pytest's
     # capture; later tests' loggers would be lost (seen with ROS sourced): put it back.
     monkeypatch.setattr(logging, "_loggerClass", logging.getLoggerClass())
@@ -165,7 +167,6 @@ def test_launch_description_builds_where_ros_is_installed(tmp_path, monkeypatch)
             importlib.import_module(module)
         except ImportError as error:   # not sourced, or its own dependencies (lark) missing
             pytest.skip(f"{module} cannot be imported (no ROS 2 sourced?): {error}")
-    # An ament prefix holding this source tree's files, as colcon would install them.
     share = tmp_path / "share"
     (share / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
     (share / "ament_index" / "resource_index" / "packages" / "arm_sim_ros").touch()
@@ -173,14 +174,22 @@ def test_launch_description_builds_where_ros_is_installed(tmp_path, monkeypatch)
     for folder in ("config", "urdf", "rviz", "launch"):
         (share / "arm_sim_ros" / folder).symlink_to(ROOT / folder)
     monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path))
+
+
+def load_launch(path):
+    spec = importlib.util.spec_from_file_location(path.stem.replace(".", "_"), path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_launch_description_builds_where_ros_is_installed(tmp_path, monkeypatch):
+    ament_share(tmp_path, monkeypatch)
     from launch import LaunchContext, LaunchDescription
     from launch.actions import DeclareLaunchArgument
     from launch_ros.actions import Node
 
-    spec = importlib.util.spec_from_file_location("arm_sim_launch", LAUNCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    description = module.generate_launch_description()
+    description = load_launch(LAUNCH).generate_launch_description()
     assert isinstance(description, LaunchDescription)
     names = {a.name for a in description.entities if isinstance(a, DeclareLaunchArgument)}
     assert names == ARGUMENTS
@@ -190,3 +199,25 @@ def test_launch_description_builds_where_ros_is_installed(tmp_path, monkeypatch)
         (rviz2,) = [n for n in description.entities if isinstance(n, Node)
                     and n.node_package == "rviz2"]
         assert rviz2.condition.evaluate(context) is launched
+
+
+def test_the_ros2_control_launch_builds_each_controller_where_ros_is_installed(tmp_path,
+                                                                                monkeypatch):
+    ament_share(tmp_path, monkeypatch)
+    from launch import LaunchContext
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+
+    module = load_launch(CONTROL_LAUNCH)
+    description = module.generate_launch_description()
+    context = LaunchContext()
+    for argument in description.entities:
+        if isinstance(argument, DeclareLaunchArgument):
+            context.launch_configurations[argument.name] = argument.default_value[0].text
+    (opaque,) = [e for e in description.entities if isinstance(e, OpaqueFunction)]
+    for choice, (controller, _) in module.CONTROLLERS.items():
+        context.launch_configurations["controller"] = choice
+        node, spawner = opaque.execute(context)
+        assert spawner.node_package == "controller_manager" and node.node_package == "arm_sim_ros"
+    context.launch_configurations["controller"] = "velocity"
+    with pytest.raises(ValueError, match="controller:=velocity is not one of"):
+        opaque.execute(context)

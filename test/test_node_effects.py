@@ -168,6 +168,11 @@ AT_START = {
 }
 COMPLIANT = {"joint_limits.lower": [-0.5, -2.5], "joint_limits.upper": [0.5, 2.5],
              "joint_limits.stiffness": 500.0, "joint_limits.damping": 2.0}
+SERVO = {"servo.interface": ["position", "velocity"], "servo.kp": [200.0, 20.0],
+         "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 0.0], "servo.integral_limit": [20.0, 5.0],
+         "servo.tracking": [2.0, 1.0]}
+POLICY = {"hard_limits": "gravity_compensation", "compliant_limits": "gravity_compensation",
+          "servo": "command_gravity_compensation"}
 
 
 def scene_text(values: dict) -> str:
@@ -187,15 +192,20 @@ def scene_text(values: dict) -> str:
 def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_names_it():
     keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPING_EFFECTS.items()
                                 for p in kind.parameters}
-    assert {spec.name for spec in EFFECT_PARAMETERS} == keys == set(AT_START) | set(COMPLIANT)
-    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair"}  # double, double[]
+    assert ({spec.name for spec in EFFECT_PARAMETERS} == keys
+            == set(AT_START) | set(COMPLIANT) | set(SERVO))
+    # double, double[], string[] (the servo's interface names)
+    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list"}
 
 
-@pytest.mark.parametrize("values", [AT_START, COMPLIANT], ids=["hard_limits", "compliant_limits"])
-def test_every_effect_set_at_start_reaches_the_simulator_as_the_scene_file_would(tmp_path, values):
-    core = make_core(policy="gravity_compensation", step_size=0.001, **values)
+@pytest.mark.parametrize("values", [AT_START, COMPLIANT, SERVO],
+                         ids=["hard_limits", "compliant_limits", "servo"])
+def test_every_effect_set_at_start_reaches_the_simulator_as_the_scene_file_would(tmp_path, values,
+                                                                                   request):
+    policy = POLICY[request.node.callspec.id]
+    core = make_core(policy=policy, step_size=0.001, **values)
     path = tmp_path / "every_effect.yaml"
-    path.write_text("policy: gravity_compensation\nstep_size: 0.001\n" + scene_text(values))
+    path.write_text(f"policy: {policy}\nstep_size: 0.001\n" + scene_text(values))
     from_file = load_scene(str(path))
     for effect in {name.partition(".")[0] for name in values}:
         assert getattr(core.sim.scene, effect) == getattr(from_file, effect), effect
@@ -242,7 +252,7 @@ def test_a_ros2_param_dump_with_keys_not_set_starts_the_node_again(tmp_path):
 
 def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_is_start_only():
     names = {spec.name for spec in EFFECT_PARAMETERS}
-    live = {"effort_limits", "friction", "controller_model", "payload"}
+    live = {"effort_limits", "friction", "controller_model", "payload", "servo"}
     assert {n.partition(".")[0] for n in names & set(LIVE)} == live
     assert set(LIVE) == {"damping"} | {n for n in names if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",

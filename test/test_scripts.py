@@ -127,7 +127,7 @@ def test_setup_runs_pip_once_and_again_only_when_setup_py_changes(tmp_path):
         return pip_calls(venv)
 
     assert test_script() == [f"-m pip install -q --disable-pip-version-check -e "
-                             f"{checkout}[test,bench]"]
+                             f"{checkout}[test,bench,fit]"]
     assert len(test_script()) == 1                      # set up: no pip, no network
     (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
     assert run([str(checkout / "scripts/run")], env).returncode == 0
@@ -146,7 +146,7 @@ def test_a_venv_installed_from_another_checkout_is_installed_again(tmp_path):
     for checkout in (first, second, first):
         assert run([str(checkout / "scripts/test"), "--version"], env).returncode == 0
     assert [call.split()[-1] for call in pip_calls(venv)] == [
-        f"{first}[test,bench]", f"{second}[test,bench]", f"{first}[test,bench]"]
+        f"{first}[test,bench,fit]", f"{second}[test,bench,fit]", f"{first}[test,bench,fit]"]
 
 
 @pytest.mark.parametrize("script", ["run", "test"])

@@ -13,9 +13,11 @@ import time
 from math import isfinite
 
 from ..interface import NODE_NAME
+from ..physics.effects import servo
 from ..physics.scene import angle_warning, changed_values, load_scene
 from ..physics.urdf import read_urdf
 from ..physics.simulator import Simulator
+from .command_input import CommandInput
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
 from .parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
@@ -23,7 +25,7 @@ from .recorder_link import RecorderLink, make_recorder
 from .status import Interval, health, status_line
 
 
-class ArmSimCore:
+class ArmSimCore(CommandInput):
     """Simulator + command handling + message assembly; transports call in, never the reverse."""
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
@@ -35,6 +37,7 @@ class ArmSimCore:
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
         self.lockstep_states = []         # JointStates of lockstep ticks not yet published
+        self.paused = False               # no physics; the held state is published (simulation.py)
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
@@ -92,32 +95,11 @@ class ArmSimCore:
         self.log.info(text)
         self.recorder.event(text)
 
-    def on_command(self, data) -> str | None:
-        """Take [tau1, tau2] from joint_torque_commands; returns the refusal reason, if any."""
-        return self._apply(*self.commands.take(data, self.config.scene.policy,
-                                               self.config.values["torque_limit"], self.sim.time))
-
-    def on_joint_state_command(self, names, position, velocity, effort) -> str | None:
-        """Take a sensor_msgs/JointState command from joint_commands (efforts by joint name);
-        returns the refusal reason, if any."""
-        v = self.config.values
-        return self._apply(*self.commands.take_joint_state(
-            names, position, velocity, effort, v["joint_names"], self.config.scene.policy,
-            v["torque_limit"], self.sim.time))
-
-    def _apply(self, reason: str | None, command) -> str | None:
-        if reason is not None:
-            self.recorder.refused(reason)
-        elif command is not None:
-            self._set_command(*command)
-            if self.config.values["lockstep"]:     # one tick per command, under that command
-                self.lockstep_states.append(self._tick())
-        return reason
-
-    def _set_command(self, tau1: float, tau2: float) -> None:
+    def _set_command(self, tau1: float, tau2: float, setpoints=None) -> None:
         """Hold a new command; the steps taken under the old one reach the recorder first."""
         self.recorder.hand_over()
         self.sim.set_command(tau1, tau2)
+        servo.set_points(self.sim.dynamics, setpoints or {})
 
     def _change_physics(self, names: list) -> None:
         """Live effects changed: the new physics from the next step, state and books carried
@@ -127,18 +109,26 @@ class ArmSimCore:
         self.recorder.hand_over()
         if "payload.mass" in names:         # grasp (momentum kept) or release (velocity kept)
             self.sim.set_payload(self.config.values["payload.mass"] or 0.0)
-        if names != ["payload.mass"]:
-            self.sim.change_scene(self.config.scene.replace(payload=self.sim.scene.payload))
+        if names != ["payload.mass"]:          # a servo switched bumplessly (servo.py)
+            servo.change_scene(self.sim, self.config.scene.replace(payload=self.sim.scene.payload))
+            self.commands.value = tuple(self.sim.dynamics.command)
         self.recorder.start(self.sim)
         self._event(live_change(names, self.config.values, self.sim.time))
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
         lockstep, where each command ticks instead (lockstep_states holds their JointStates
-        until the transport publishes them)."""
+        until the transport publishes them). Paused: the held state, time standing still."""
+        if self.paused:
+            return self.joint_state()
         if self.config.values["lockstep"]:
             return None
         return self._tick(wall_now)
+
+    def step_ticks(self, count: int) -> list:
+        """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""
+        self._last_tick_wall = None       # asked for: not late
+        return [self._tick() for _ in range(count)]
 
     def take_lockstep_states(self) -> list:
         states, self.lockstep_states = self.lockstep_states, []
@@ -149,6 +139,7 @@ class ArmSimCore:
         if not self.held:
             if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
                 self._set_command(0.0, 0.0)
+                servo.hold(self.sim.dynamics, self.sim.state)
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
         return self.joint_state()

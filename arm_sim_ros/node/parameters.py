@@ -96,7 +96,8 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
-        "float_pair" if parameter.kind == "pair" else "float", _effect_value(effect, key),
+        {"pair": "float_pair", "names": "str_list"}.get(parameter.kind, "float"),
+        _effect_value(effect, key),
         f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
         when=START if effect in START_ONLY_WHY else KEPT)
 
@@ -115,7 +116,7 @@ PARAMETERS = (
                   "masses, inertias, limits, damping, friction and joint names replace the "
                   "scene's (\"\" = the scene's arm)", when=START),
     _scene_spec("policy", "str", "torque policy: command, command_gravity_compensation, zero, "
-                "constant, gravity_compensation, frozen_gravity", _node_policy),
+                "constant, gravity_compensation, frozen_gravity, setpoint (servos)", _node_policy),
     _scene_spec("constant_torque", "float_pair", "[tau1, tau2] N m for policy constant"),
     _scene_spec("gravity", "float", "gravity magnitude along -y, m/s^2 (0 = off)"),
     _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)",

@@ -141,6 +141,7 @@ class Batch:
             constants["TORQUE1"], constants["TORQUE2"] = gravity * k1 * np.cos(q0[:, 0]) + g2, g2
         constants.pop("command", None)
         self.command = [np.zeros(self.count), np.zeros(self.count)]
+        self._setpoint = _servo_setpoint(scene, constants.pop("SP", None), q0)
         # A constant shared by every arm stays a float: scalar * array is the cheaper loop.
         self._constants = {k: _shared_or_array(c, self.count) for k, c in constants.items()}
         self._namespace = dict(dynamics.function.__globals__, cos=np.cos, sin=np.sin,
@@ -198,6 +199,7 @@ class Batch:
 
     def _rhs_for(self, chunk: slice):
         namespace = dict(self._namespace, command=[c[chunk] for c in self.command],
+                         SP=[c if isinstance(c, float) else c[chunk] for c in self._setpoint],
                          **{k: c if isinstance(c, float) else c[chunk]
                             for k, c in self._constants.items()})
         exec(self._code, namespace)
@@ -301,3 +303,15 @@ def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int
     return {"arms": count, "steps": steps, "threads": threads, "seconds": elapsed,
             "arm_steps_per_s": count * steps / elapsed, "non_finite_arms": int((~finite).sum()),
             "max_diff_vs_single_arm": worst}
+
+
+def _servo_setpoint(scene, setpoint, q0) -> list:
+    """The servo's set-points (effects/servo.py): a joint holding its initial pose holds each
+    arm's own; the scene's `setpoint` is every arm's. [] without a servo."""
+    if setpoint is None:
+        return []
+    setpoint = [float(v) for v in setpoint]
+    for i, kind in enumerate(scene.servo["interface"]):
+        if not (scene.policy == "setpoint" and kind == "position"):
+            setpoint[i] = q0[:, i]
+    return setpoint

@@ -72,6 +72,8 @@ class Dynamics:
             return None
 
         def check(state):
+            if "servo" in effects:            # it clamps to the effort limits itself
+                return motors.saturation(effects["servo"].requested_torque(state))
             torque = effects["actuator"].requested_torque(state[0:2])
             return motors.saturation(limits.clamp(torque) if limits is not None else torque)
 

@@ -14,7 +14,8 @@ from pathlib import Path
 
 from .. import yaml_files
 from .accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
-from .effects import BUILDERS, MAPPING_EFFECTS, POLICIES, EffortLimits, JointLimits, Motors, validate
+from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
+                      JointLimits, Motors, validate)
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import PAIR_FIELDS, ArmParameters, ParameterError
 
@@ -45,6 +46,7 @@ class Scene:
     com_inertias: tuple[float, float] = ArmParameters.com_inertias
     policy: str = "zero"
     constant_torque: tuple[float, float] = (0.0, 0.0)
+    setpoint: tuple[float, float] = (0.0, 0.0)   # policy setpoint: each servo joint's target
     # Effects named by a mapping of their parameters (effects/*.py); None = absent.
     springs: dict | None = None
     payload: dict | None = None
@@ -53,6 +55,7 @@ class Scene:
     controller_model: dict | None = None
     friction: dict | None = None
     joint_limits: dict | None = None
+    servo: dict | None = None
     integrator: str = "rk4"
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
@@ -75,6 +78,11 @@ class Scene:
             raise SceneError(f"damping = {_text(self.damping)} would add energy; it must be >= 0")
         if self.policy not in POLICIES:
             raise SceneError(f"policy {self.policy!r} is unknown; choose one of {', '.join(POLICIES)}")
+        if self.policy == "setpoint" and self.servo is None:
+            raise SceneError("policy setpoint needs a servo (scene key servo: interface, kp ...)")
+        if self.servo is not None and self.policy not in SERVO_POLICIES:
+            raise SceneError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
+                             f"{self.policy!r}")
         if self.integrator not in INTEGRATORS:
             raise SceneError(f"integrator {self.integrator!r} is unknown; choose one of "
                              f"{', '.join(INTEGRATORS)}")
@@ -235,6 +243,8 @@ def parse_value(key: str, text: str):
         kind = "pair" if "," in text else "float"
     if kind == "effect":
         raise SceneError(f"--set {key}=... sets one parameter at a time: {key}.NAME=VALUE")
+    if kind == "names":
+        return tuple(v.strip() for v in text.split(","))
     try:
         if kind == "pair":
             return tuple(_number(key, v) for v in text.split(","))

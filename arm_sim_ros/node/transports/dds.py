@@ -18,12 +18,13 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from .. import messages as msg
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import resolve_parameters
 from ..ros_args import remap_name
 from ..schedule import TickSchedule
+from ..simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
 
@@ -69,8 +70,11 @@ class DdsArmSimNode:
         self.command_reader = self._reader(topic(COMMAND_TOPIC), msg.Float64MultiArray)
         self.joint_command_reader = self._reader(topic(values["joint_commands_topic"]),
                                                  msg.JointState)
+        self.setpoint_readers = {field: self._reader(topic(name), msg.Float64MultiArray)
+                                 for field, name in SETPOINT_TOPICS.items()}
         self._command_ready = WaitSet(self.participant)
-        for reader in (self.command_reader, self.joint_command_reader):
+        for reader in (self.command_reader, self.joint_command_reader,
+                       *self.setpoint_readers.values()):
             self._command_ready.attach(ReadCondition(
                 reader, SampleState.Any | ViewState.Any | InstanceState.Any))
         # rcl_interfaces parameter services, ~/reset, /parameter_events
@@ -79,7 +83,9 @@ class DdsArmSimNode:
         self._announce()
         self.name_watch = NameWatch(self.participant, namespace, name, self.log)
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
-        self.services.attach(self.core)
+        self.simulation = SimulationControl(self.core, self._publish, self.take_commands)
+        self.services.attach(self.core, self.simulation)
+        self._publish_clock()      # use_sim_time nodes (controller_manager) wait for a first one
 
     def _reader(self, topic_name: str, message_type) -> DataReader:
         return DataReader(self.participant, Topic(self.participant, topic_name, message_type),
@@ -99,6 +105,7 @@ class DdsArmSimNode:
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
             reader_gid_seq=[msg.gid(self.command_reader), msg.gid(self.joint_command_reader)]
+            + [msg.gid(r) for r in self.setpoint_readers.values()]
             + [msg.gid(r) for r in self.services.readers],   # service requests
             writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer),
                             msg.gid(self.clock_writer)]
@@ -118,6 +125,11 @@ class DdsArmSimNode:
             if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
                 self.core.on_command(sample.data)
                 count += 1
+        for field, reader in self.setpoint_readers.items():
+            for sample in reader.take(N=256):
+                if isinstance(sample, msg.Float64MultiArray):
+                    self.core.on_setpoint_command(field, sample.data)
+                    count += 1
         for sample in self.joint_command_reader.take(N=256):
             if isinstance(sample, msg.JointState):
                 self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
@@ -142,6 +154,11 @@ class DdsArmSimNode:
         if self.core.config.values["publish_clock"]:
             self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
 
+    def _publish_clock(self) -> None:
+        """The current time on /clock: at start, and while lockstep waits for a command."""
+        if self.core.config.values["publish_clock"]:
+            self.clock_writer.write(msg.Clock(_stamp(self.core.stamp_ns())))
+
     def publish_diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
         data = self.core.diagnostics(wall_now)
         self.diagnostics_writer.write(to_diagnostic_array(data))
@@ -160,9 +177,10 @@ class DdsArmSimNode:
         next_status = schedule.next_tick + 1.0
         while end_ns is None or self.core.stamp_ns() - self.core.start_stamp_ns < end_ns:
             now = self.wall_clock()
-            if self.core.config.values["lockstep"]:    # commands tick: wait for them
-                self.services.poll()
-                self.take_commands(timeout=LOCKSTEP_WAIT)
+            if self.core.config.values["lockstep"] and not self.core.paused:
+                self.services.poll()                   # commands tick: wait for them
+                if not self.take_commands(timeout=LOCKSTEP_WAIT):
+                    self._publish_clock()              # the time, while nobody commands
             else:
                 if schedule.wait(now) > 0:
                     self.services.serve_for(schedule.wait(now))   # sleep, serving
@@ -189,4 +207,5 @@ class DdsArmSimNode:
         self.services.close()
         self._command_ready = self.command_reader = self.discovery_writer = None
         self.joint_command_reader = self.clock_writer = self.name_watch = None
+        self.setpoint_readers = {}
         self.joint_state_writer = self.diagnostics_writer = self.participant = None

@@ -35,6 +35,7 @@ from .. import parameter_services as ps
 from ..ros_args import full_node_name
 from ..wire_errors import check_topic_name
 from . import dds_service_types as t
+from .dds_simulation import ROS_TYPE_NAMES, TYPE_HASHES, DdsSimulation
 
 REPLY_WAIT = 2.0          # s a reply waits for its client's reply reader to be matched
 PARAMETERS_DEPTH = 1000   # rmw_qos_profile_parameters / rmw_qos_profile_parameter_events
@@ -44,7 +45,8 @@ _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 def endpoint_qos(message_type, depth: int, user_data: str = "") -> Qos:
     """rmw_cyclonedds' create_readwrite_qos for reliable, volatile, keep-last `depth`."""
-    typehash = t.TYPE_HASHES[t.ROS_TYPE_NAMES[message_type]]
+    name = t.ROS_TYPE_NAMES.get(message_type) or ROS_TYPE_NAMES[message_type]
+    typehash = t.TYPE_HASHES.get(name) or TYPE_HASHES[name]
     return Qos(Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
                Policy.Durability.Volatile, Policy.History.KeepLast(depth),
                Policy.WriterDataLifecycle(autodispose=False),
@@ -168,10 +170,13 @@ class DdsServices:
              self._types),
             ("reset", t.TriggerRequest, t.TriggerResponse, self._reset),
         )
+        # the Simulation Interfaces, under the node's namespace (not ~/): dds_simulation.py
+        self.simulation = DdsSimulation()
+        services = [(f"~/{name}", *rest) for name, *rest in services] + self.simulation.services()
         self.endpoints = [
-            ServiceEndpoint(participant, check_topic_name(resolve(f"~/{service}"), "service name"),
+            ServiceEndpoint(participant, check_topic_name(resolve(service), "service name"),
                             request, reply, handler,
-                            SERVICES_DEPTH if service == "reset" else PARAMETERS_DEPTH,
+                            PARAMETERS_DEPTH if "parameter" in service else SERVICES_DEPTH,
                             cs_id(guid, index + 1))
             for index, (service, request, reply, handler) in enumerate(services)]
         self.waitset = WaitSet(participant)
@@ -187,9 +192,10 @@ class DdsServices:
     def writers(self) -> list:
         return [self.events_writer] + [endpoint.writer for endpoint in self.endpoints]
 
-    def attach(self, core) -> None:
-        """Serve `core`'s parameters; announce them as new, as rclpy does when it declares them."""
-        self.core = core
+    def attach(self, core, control=None) -> None:
+        """Serve `core`'s parameters; announce them as new, as rclpy does when it declares them.
+        `control`: the SimulationControl the Simulation Interfaces drive."""
+        self.core, self.simulation.control = core, control
         self.log = core.log if self.log is None else self.log
         self.parameters = ps.ParameterServices(core, self.log, self._publish_event)
         self._publish_event(new=[spec.name for spec in ps.PARAMETERS])

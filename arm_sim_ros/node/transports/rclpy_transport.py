@@ -19,12 +19,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, split_stamp
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused, resolve_parameters,
                           scene_defaults)
 from ..schedule import TickSchedule
+from ..simulation import SimulationControl
+from . import rclpy_simulation
 
 
 def _stamp(stamp_ns: int) -> Time:
@@ -82,13 +84,25 @@ class ArmSimNode(Node):
             Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
         self.joint_command_subscription = self.create_subscription(
             JointState, values["joint_commands_topic"], self.on_joint_command, 10)
+        self.setpoint_subscriptions = [
+            self.create_subscription(Float64MultiArray, name,
+                                     lambda message, field=field: self.on_setpoint(field, message),
+                                     10)
+            for field, name in SETPOINT_TOPICS.items()]
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
+        self.simulation = SimulationControl(self.core, self._publish)
+        self.simulation_services = rclpy_simulation.serve(self, self.simulation)
         self.schedule = TickSchedule(self.core.wall_clock())
         self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
+        self._publish_clock()           # use_sim_time nodes (controller_manager) wait for one
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
+        self._publish_lockstep()
+
+    def on_setpoint(self, field: str, message: Float64MultiArray) -> None:
+        self.core.on_setpoint_command(field, list(message.data))
         self._publish_lockstep()
 
     def on_joint_command(self, message: JointState) -> None:
@@ -102,8 +116,10 @@ class ArmSimNode(Node):
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
-        callback, as each spin costs Python time, still keeps real_time_factor); nothing in
-        lockstep, where the commands tick."""
+        callback, as each spin costs Python time, still keeps real_time_factor). In
+        lockstep, where the commands tick: the time on /clock (paused: the held state)."""
+        if self.core.config.values["lockstep"] and self.on_tick() is None:
+            self._publish_clock()       # the time while lockstep waits (use_sim_time peers)
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
@@ -116,6 +132,10 @@ class ArmSimNode(Node):
         self.joint_state_publisher.publish(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
             self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
+
+    def _publish_clock(self) -> None:
+        if self.core.config.values["publish_clock"]:
+            self.clock_publisher.publish(Clock(clock=_stamp(self.core.stamp_ns())))
 
     def on_diagnostics(self) -> DiagnosticData:
         rtf = self.core.real_time_factor(self.core.wall_clock())

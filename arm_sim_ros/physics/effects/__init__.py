@@ -16,20 +16,22 @@ from .gravity import Gravity
 from .joint_limits import CompliantLimits, HardLimits, JointLimits
 from .motors import Motors
 from .payload import Payload
+from .servo import SERVO_POLICIES, Servo
 from .springs import Springs
 
 __all__ = ["POLICIES", "Actuator", "Channel", "CompliantLimits", "ControllerModel", "Damping",
            "Effect", "EffortLimits", "Friction", "Gravity", "HardLimits", "JointLimits", "Motors",
-           "Parameter", "Payload", "Springs", "BUILDERS", "MAPPING_EFFECTS", "scene_effects",
+           "Parameter", "Payload", "Servo", "Springs", "BUILDERS", "MAPPING_EFFECTS", "scene_effects",
            "validate"]
 
 # Scene keys whose value is a mapping of the effect's parameters.
 MAPPING_EFFECTS = {"springs": Springs, "payload": Payload, "motors": Motors,
                    "controller_model": ControllerModel, "friction": Friction,
-                   "joint_limits": JointLimits}
+                   "joint_limits": JointLimits, "servo": Servo}
 # How a scene's validated mapping becomes the effect (with its cross-checks: windings all
 # three or none, Fs >= Fc, lower < upper, restitution or stiffness).
-BUILDERS = {"motors": Motors, "friction": Friction, "joint_limits": JointLimits.make}
+BUILDERS = {"motors": Motors, "friction": Friction, "joint_limits": JointLimits.make,
+            "servo": Servo}
 COMPENSATING = ("gravity_compensation", "command_gravity_compensation")
 
 
@@ -45,7 +47,8 @@ def scene_effects(scene, command=None) -> list[Effect]:
     believed = (ControllerModel(scene.links, scene.gravity, _payload_mass(scene),
                                 **scene.controller_model)
                 if scene.controller_model is not None else None)
-    actuator = _actuator(scene, arm, believed, command, windings)
+    actuator = (_actuator(scene, arm, believed, command, windings) if scene.servo is None
+                else _servo(scene, arm, believed, command, windings))
     # A request that depends on the state (compensation) crosses its clamps inside a step:
     # they switch as located events then; else the clamp is constant within the step.
     located = actuator is not None and actuator.compensates
@@ -53,7 +56,7 @@ def scene_effects(scene, command=None) -> list[Effect]:
         if believed is not None and actuator.compensates:
             effects.append(believed)
         effects.append(actuator)
-        if scene.effort_limits is not None:
+        if scene.effort_limits is not None and scene.servo is None:   # the servo clamps
             effects.append(EffortLimits(scene.effort_limits, switching=located))
     if windings and motors.voltage_limit is not None:
         motors.switching = located
@@ -74,6 +77,26 @@ def scene_effects(scene, command=None) -> list[Effect]:
 
 def _payload_mass(scene) -> float:
     return scene.payload["mass"] if scene.payload is not None else 0.0
+
+
+def _believed_torque(scene, arm, believed):
+    gravity = believed.gravity if believed is not None else scene.gravity
+    return (believed.gravity_torque if believed is not None
+            else lambda q: model.gravity_torque(arm, q, gravity))
+
+
+def _servo(scene, arm, believed, command, windings) -> Servo:
+    """The joint servos, the actuator of a scene with `servo` (its policy: setpoint or a
+    command one); compensation feeds the believed gravity torque forward."""
+    compensates = scene.policy == "command_gravity_compensation" and (
+        believed.gravity if believed is not None else scene.gravity) != 0.0
+    return Servo(**scene.servo, policy=scene.policy if compensates or scene.policy != (
+                     "command_gravity_compensation") else "command",
+                 setpoint=scene.setpoint, initial_positions=scene.initial_positions,
+                 effort_limits=scene.effort_limits, command=command,
+                 compensation=_believed_torque(scene, arm, believed),
+                 work_kind="transfer" if windings else "input",
+                 believed="gc" if believed is not None else "g")
 
 
 def _actuator(scene, arm, believed, command, windings) -> Actuator | None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from .base import Channel, Effect
 
 POLICIES = ("zero", "constant", "gravity_compensation", "frozen_gravity", "command",
-            "command_gravity_compensation")
+            "command_gravity_compensation", "setpoint")    # setpoint: the servo's (servo.py)
 POLICY_TORQUE = {
     # policy: (torque lines, compensates gravity: needs the stage's gravity torque)
     "zero": ("t1 = 0.0; t2 = 0.0", False),

@@ -27,15 +27,18 @@ class Parameter:
     """One scene key of an effect: `<effect>.<name>` in a scene file, --set and ROS params."""
 
     name: str
-    kind: str              # "pair" (one value per joint) or "float"
-    unit: str
+    kind: str              # "pair" (one value per joint), "float", or "names" (one of
+    unit: str              # `choices` per joint)
     check: str = "any"
     default: object = REQUIRED
     description: str = ""
+    choices: tuple = ()
 
     def coerce(self, effect: str, value):
         """The value as a float or a pair of floats, or ParameterError saying why."""
         label = effect if effect == self.name else f"{effect}.{self.name}"   # effort_limits
+        if self.kind == "names":
+            return self._names(label, value)
         if self.kind == "pair":
             if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
                 raise ParameterError(f"{label} must be a list of two numbers ({self.unit}), "
@@ -45,6 +48,16 @@ class Parameter:
                                      f"got {len(value)}")
             return tuple(self._number(f"{label}[{i}]", v) for i, v in enumerate(value))
         return self._number(label, value)
+
+    def _names(self, label: str, value) -> tuple:
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+            raise ParameterError(f"{label} needs two names, one per joint ({self.unit}), "
+                                 f"got {value!r}")
+        for i, name in enumerate(value):
+            if name not in self.choices:
+                raise ParameterError(f"{label}[{i}] = {name!r} is not one of "
+                                     f"{', '.join(self.choices)}")
+        return tuple(value)
 
     def _number(self, label: str, value) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):

@@ -1,0 +1,227 @@
+"""Joint servos: a PID per joint turns a position or velocity set-point into the joint torque.
+
+Scene: `servo: {interface: [position, velocity], kp: [..], ki: [..], kd: [..]}`, optional
+`integral_limit` (N m) and `tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
+
+- position: eᵢ = qᵢ* − qᵢ,  rᵢ = kpᵢ eᵢ + kdᵢ (q̇ᵢ* − q̇ᵢ) + clamp(wᵢ, ±Wᵢ)
+- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ)          (kd must be 0: it would
+  act on the acceleration the torque causes)
+- effort:   rᵢ = the commanded torque (the command policies) or the scene's `setpoint`
+
+plus the believed gravity torque under command_gravity_compensation (feed-forward). The
+request is clamped to the effort limits, τᵢ = clamp(rᵢ, ±eᵢ), here (the servo replaces the
+effort_limits effect, whose clamp it needs for its anti-windup), then drives the joint, or
+with motor windings the driver, which turns it into the voltage Vᵢ = Rᵢ τᵢ / (Nᵢ kᵢ)
+(motors.py). The integral torque wᵢ is an extra state integrated at the RK stages like a
+winding current:
+
+    dwᵢ/dt = kiᵢ eᵢ + bᵢ (τᵢ − rᵢ) + bᵢ (clamp(wᵢ, ±Wᵢ) − wᵢ)
+
+the back-calculation anti-windup (Åström & Hägglund): while the effort limit cuts the
+request, or the integral is past its clamp, wᵢ is pulled back at the tracking rate bᵢ
+(default kiᵢ/kpᵢ: the tracking time is the integral time). Both terms are continuous in the
+state, so RK4 needs no event. The servo is the actuator: its power τᵀq̇ is booked as `work`
+(an input; a transfer through windings, whose electrical input is the input then), so the
+energy books close as with any policy. It stores no energy.
+"""
+from __future__ import annotations
+
+from ..model import ParameterError
+from ..stability import worst_stiffness
+from .actuator import Actuator
+from .base import Parameter
+
+INTERFACES = ("position", "velocity", "effort")
+SERVO_POLICIES = ("setpoint", "command", "command_gravity_compensation")
+
+
+class Servo(Actuator):
+    name = "servo"
+    parameters = (
+        Parameter("interface", "names", "position|velocity|effort", default=("position",) * 2,
+                  description="what each joint is commanded in", choices=INTERFACES),
+        Parameter("kp", "pair", "N m/rad or N m s/rad", "non-negative",
+                  description="proportional gain on the position (velocity) error"),
+        Parameter("ki", "pair", "N m/(rad s) or N m/rad", "non-negative", default=(0.0, 0.0),
+                  description="integral gain"),
+        Parameter("kd", "pair", "N m s/rad", "non-negative", default=(0.0, 0.0),
+                  description="derivative gain on the velocity error (position joints)"),
+        Parameter("integral_limit", "pair", "N m", "positive", default=None,
+                  description="largest integral torque (none = only the anti-windup)"),
+        Parameter("tracking", "pair", "1/s", "positive", default=None,
+                  description="anti-windup back-calculation rate (none = ki/kp)"),
+    )
+
+    def __init__(self, interface=("position", "position"), kp=(0.0, 0.0), ki=(0.0, 0.0),
+                 kd=(0.0, 0.0), integral_limit=None, tracking=None, *, policy="setpoint",
+                 setpoint=(0.0, 0.0), initial_positions=(0.0, 0.0), effort_limits=None,
+                 command=None, compensation=None, work_kind="input", believed="g"):
+        for i, (kind, d) in enumerate(zip(interface, kd)):
+            if kind == "velocity" and d != 0.0:
+                raise ParameterError(f"servo.kd[{i}] = {d:g} on a velocity joint would act on "
+                                     "the acceleration; a velocity servo takes kp and ki")
+        if policy not in SERVO_POLICIES:
+            raise ParameterError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
+                                 f"{policy!r}")
+        self.interface, self.kp, self.ki, self.kd = tuple(interface), kp, ki, kd
+        self.integral_limit, self.effort_limits = integral_limit, effort_limits
+        self.tracking = tracking or tuple(i / p if i > 0 and p > 0 else 1.0
+                                          for i, p in zip(ki, kp))
+        self.policy, self.compensation, self.work_kind = policy, compensation, work_kind
+        self.compensates = policy == "command_gravity_compensation"
+        self.believed, self.fixed = believed, None
+        self.command = command if command is not None else [0.0, 0.0]
+        # [q1*, q2*, q̇1*, q̇2*, τ1*, τ2*]: read at every stage, written between steps
+        self.setpoint = [*initial_positions, 0.0, 0.0, 0.0, 0.0]
+        if policy == "setpoint":
+            for i, (kind, value) in enumerate(zip(interface, setpoint)):
+                self.setpoint[{"position": 0, "velocity": 2, "effort": 4}[kind] + i] = value
+        self.state = ("integral1", "integral2")
+
+    def constants(self, arm) -> dict:
+        out = {"command": self.command, "SP": self.setpoint}
+        for i in (0, 1):
+            j = i + 1
+            out |= {f"KP{j}": self.kp[i], f"KI{j}": self.ki[i], f"KD{j}": self.kd[i],
+                    f"KB{j}": self.tracking[i]}
+            if self.integral_limit is not None:
+                out[f"WLIM{j}"] = self.integral_limit[i]
+            if self.effort_limits is not None:
+                out[f"EFFORT{j}"] = self.effort_limits[i]
+        return out
+
+    def terms(self) -> list[str]:
+        lines = []
+        for i in (0, 1):
+            j, kind = i + 1, self.interface[i]
+            lines.append(f"wc{j} = MIN(MAX(integral{j}, -WLIM{j}), WLIM{j})"
+                         if self.integral_limit is not None else f"wc{j} = integral{j}")
+            if kind == "position":
+                lines += [f"e{j} = SP[{i}] - q{j}",
+                          f"r{j} = KP{j} * e{j} + KD{j} * (SP[{2 + i}] - u{j}) + wc{j}"]
+            elif kind == "velocity":
+                lines += [f"e{j} = SP[{2 + i}] - u{j}", f"r{j} = KP{j} * e{j} + wc{j}"]
+            else:
+                held = f"SP[{4 + i}]" if self.policy == "setpoint" else f"command[{i}]"
+                lines += [f"e{j} = 0.0", f"r{j} = {held}"]
+            if self.compensates:
+                lines.append(f"r{j} += {self.believed}{j}")
+            lines.append(f"ts{j} = MIN(MAX(r{j}, -EFFORT{j}), EFFORT{j})"
+                         if self.effort_limits is not None else f"ts{j} = r{j}")
+            lines.append(f"t{j} = ts{j}")
+        return lines
+
+    def rates(self) -> list[str]:
+        # no integral action (ki = 0, an effort joint): the integral stays where it is
+        return [f"KI{j} * e{j} + KB{j} * (ts{j} - r{j} + wc{j} - integral{j})"
+                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 else "0.0"
+                for j in (1, 2)]
+
+    def stiffness(self, arm) -> float:
+        # Velocity feedback (kd on a position joint, kp on a velocity joint) is a damper;
+        # the back-calculation a decay of the integral at rate b.
+        damping = max(kd if kind == "position" else kp if kind == "velocity" else 0.0
+                      for kind, kp, kd in zip(self.interface, self.kp, self.kd))
+        return damping * worst_stiffness(arm) + max(self.tracking)
+
+    def frequency(self, arm) -> float:
+        # kp on a position joint (ki on a velocity joint) is a spring; ki on a position joint
+        # adds a slower third pole, bounded by the same spring scale.
+        spring = max((kp if kind == "position" else ki if kind == "velocity" else 0.0)
+                     + (ki if kind == "position" else 0.0)
+                     for kind, kp, ki in zip(self.interface, self.kp, self.ki))
+        return (spring * worst_stiffness(arm)) ** 0.5
+
+    def requested_torque(self, state):
+        """τᵢ = clamp(rᵢ, ±eᵢ) at `state` (q, q̇, integrals first), as the servo asks now."""
+        q, u, w = state[0:2], state[2:4], state[4:6]
+        g = self.compensation(q) if self.compensates else (0.0, 0.0)
+        torque = []
+        for i, kind in enumerate(self.interface):
+            wc = w[i] if self.integral_limit is None else min(max(w[i], -self.integral_limit[i]),
+                                                               self.integral_limit[i])
+            r = (self.kp[i] * (self.setpoint[i] - q[i]) + self.kd[i] * (self.setpoint[2 + i] - u[i])
+                 + wc if kind == "position" else self.kp[i] * (self.setpoint[2 + i] - u[i]) + wc
+                 if kind == "velocity" else self.setpoint[4 + i] if self.policy == "setpoint"
+                 else self.command[i]) + g[i]
+            limit = self.effort_limits[i] if self.effort_limits is not None else float("inf")
+            torque.append(min(max(r, -limit), limit))
+        return tuple(torque)
+
+    def hold(self, q, joints=(0, 1)) -> None:
+        """Set-points from the state: a position joint holds `q`, a velocity joint stops."""
+        for i in joints:
+            self.setpoint[i], self.setpoint[2 + i] = q[i], 0.0
+
+    def bumpless(self, state, torque) -> tuple:
+        """The integrals that make the servo ask for `torque` (what the joints received) at
+        `state`, its set-points just taken from that state: a switch without a jump."""
+        q, u = state[0:2], state[2:4]
+        g = self.compensation(q) if self.compensates else (0.0, 0.0)
+        integrals = []
+        for i, kind in enumerate(self.interface):
+            rest = (self.kd[i] * (self.setpoint[2 + i] - u[i]) if kind == "position" else
+                    self.kp[i] * (self.setpoint[2 + i] - u[i]) if kind == "velocity" else None)
+            if rest is None or self.ki[i] == 0.0:      # no integral action to carry it
+                integrals.append(0.0)
+                continue
+            w = torque[i] - g[i] - rest - (self.kp[i] * (self.setpoint[i] - q[i])
+                                           if kind == "position" else 0.0)
+            if self.integral_limit is not None:
+                w = min(max(w, -self.integral_limit[i]), self.integral_limit[i])
+            integrals.append(w)
+        return tuple(integrals)
+
+
+def servo_of(dynamics) -> Servo | None:
+    """The scene's servo effect, None without one."""
+    return next((e for e in dynamics.active if isinstance(e, Servo)), None)
+
+
+def change_scene(sim, scene) -> None:
+    """`sim.change_scene(scene)` with the servo's set-points carried over; a joint whose
+    interface changed starts bumplessly: its set-points from the current state and the
+    integral that keeps the torque it asks for (an effort joint: the command that does)."""
+    old = servo_of(sim.dynamics)
+    torque = old.requested_torque(sim.state) if old is not None else sim.joint_torque()
+    sim.change_scene(scene)
+    new = servo_of(sim.dynamics)
+    if new is None:
+        return
+    if old is not None:
+        new.setpoint[:] = old.setpoint
+    switched = [i for i in (0, 1) if old is None or old.interface[i] != new.interface[i]]
+    new.hold(sim.state[0:2], switched)
+    integrals = new.bumpless(sim.state, torque)
+    g = new.compensation(sim.state[0:2]) if new.compensates else (0.0, 0.0)
+    state = list(sim.state)
+    for i in switched:
+        if new.interface[i] == "effort":
+            new.command[i] = new.setpoint[4 + i] = torque[i] - g[i]
+        state[sim.state_names.index(f"integral{i + 1}")] = integrals[i]
+    sim.state = tuple(state)
+
+
+def interfaces(dynamics) -> tuple:
+    """What each joint is commanded in: its servo's interface, else effort."""
+    joint_servo = servo_of(dynamics)
+    return joint_servo.interface if joint_servo is not None else ("effort", "effort")
+
+
+def set_points(dynamics, setpoints: dict) -> None:
+    """{(field, joint): value} into the servo's set-points (field position or velocity); a
+    position without a velocity targets rest."""
+    joint_servo = servo_of(dynamics)
+    for (field, joint), value in setpoints.items():
+        if field == "position":
+            joint_servo.setpoint[joint] = value
+            joint_servo.setpoint[2 + joint] = setpoints.get(("velocity", joint), 0.0)
+        else:
+            joint_servo.setpoint[2 + joint] = value
+
+
+def hold(dynamics, state) -> None:
+    """A command timed out: position joints hold where they are, velocity joints stop."""
+    joint_servo = servo_of(dynamics)
+    if joint_servo is not None:
+        joint_servo.hold(state[0:2], [i for i in (0, 1) if joint_servo.interface[i] != "effort"])
