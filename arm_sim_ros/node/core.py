@@ -17,6 +17,7 @@ from ..physics.simulator import Simulator
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
 from .parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
+from .rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
 from .status import Interval, health, status_line
 
@@ -26,8 +27,7 @@ class ArmSimCore:
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
                  start_stamp_ns: int | None = None, recorder=None):
-        self.log = log
-        self.wall_clock = wall_clock
+        self.log, self.wall_clock = log, wall_clock
         self.start_stamp_ns = time.time_ns() if start_stamp_ns is None else start_stamp_ns
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
@@ -46,9 +46,10 @@ class ArmSimCore:
     command_timeouts = property(lambda self: self.commands.timeouts)
     command = property(lambda self: self.commands.value)
 
-    def _configure(self, config: NodeConfig) -> None:
+    def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
+        """`config` with `sim` (default: built now) from its initial state."""
+        self.sim = build_simulator(config, SPECS) if sim is None else sim
         self.config = config
-        self.sim = Simulator(config.scene)
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
         self.sim.event_listeners.append(self._on_sim_event)
@@ -61,24 +62,30 @@ class ArmSimCore:
 
     def _on_sim_event(self, event) -> None:
         """What the simulator does later (a driver saturating...) reaches the log as it
-        happens; a fault is logged where the tick holds (_advance)."""
-        if event.kind == "switch":           # stick, slip, impact...: the physics, not a fault
-            self.log.info(f"{event.message} (at t = {event.t:.6f} s)")
+        happens; a fault is logged where the tick holds (_advance); a switch (stick, slip,
+        impact...) is the physics, not a fault."""
+        text = f"{event.message} (at t = {event.t:.6f} s)"
+        if event.kind == "switch":
+            self.log.info(text)
         elif event.kind != "fault":
-            self.warnings.warning(event.kind, f"{event.message} (at t = {event.t:.6f} s)")
+            self.warnings.warning(event.kind, text)
 
     def set_parameters(self, changes: dict) -> list:
-        """Apply runtime parameter changes; ParameterRefused leaves everything as it was.
-        Returns the names whose value changed. A change to the arm, the policy or the
-        integration restarts the scene; one to a live effect (LIVE) carries on from now."""
+        """Runtime parameter changes as one transaction (rebuild.py): the new physics built
+        and checked aside, then swapped in; ParameterRefused (the physical reason) leaves
+        config, simulator and recording as they were. Returns the names whose value changed.
+        A change to the arm, the policy or the integration restarts the scene; one to a live
+        effect (LIVE) carries on from now; one to rerun_* closes the recording, opens anew."""
         config = self.config.with_changes(changes)
         changed = [n for n in SPECS if config.values[n] != self.config.values[n]]
-        if any(n in SCENE_PARAMETERS and n not in LIVE for n in changed):
+        restart = any(n in SCENE_PARAMETERS and n not in LIVE for n in changed)
+        # what reset would build must build: a value that cannot is refused here, not later
+        sim = build_simulator(config, changed) if restart or set(changed) & set(LIVE) else None
+        if restart:
             self._restart(config, f"parameters {', '.join(changed)} changed: scene restarted "
-                                  "from its initial state")
+                                  "from its initial state", sim)
         else:
-            self.config = config
-            self._change_physics([n for n in changed if n in LIVE])
+            self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder.finish()
             self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim,
@@ -116,27 +123,25 @@ class ArmSimCore:
         self.recorder.hand_over()
         self.sim.set_command(tau1, tau2)
 
-    def _change_physics(self, names: list) -> None:
+    def _change_physics(self, config: NodeConfig, names: list) -> None:
         """Live effects changed: the new physics from the next step, state and books carried
-        over; the steps before reach the recorder first, and it learns the new channels."""
-        if not names:
-            return
+        over (rebuild.change_live); the steps before reach the recorder first, and it
+        learns the new channels."""
         self.recorder.hand_over()
-        if "payload.mass" in names:         # grasp (momentum kept) or release (velocity kept)
-            self.sim.set_payload(self.config.values["payload.mass"] or 0.0)
-        if names != ["payload.mass"]:
-            self.sim.change_scene(self.config.scene.replace(payload=self.sim.scene.payload))
-        self.recorder.start(self.sim)
-        self._event(f"{', '.join(names)} changed at t = {self.sim.time:.6f} s: the motion "
-                    "carries on from the current state (a payload's energy: payload_exchange)")
+        if names:
+            change_live(self.sim, config, names)
+        self.config = config
+        if names:
+            self.recorder.start(self.sim)
+            self._event(f"{', '.join(names)} changed at t = {self.sim.time:.6f} s: the motion "
+                        "carries on from the current state (a payload's energy: "
+                        "payload_exchange)")
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
         lockstep, where each command ticks instead (lockstep_states holds their JointStates
         until the transport publishes them)."""
-        if self.config.values["lockstep"]:
-            return None
-        return self._tick(wall_now)
+        return None if self.config.values["lockstep"] else self._tick(wall_now)
 
     def take_lockstep_states(self) -> list:
         states, self.lockstep_states = self.lockstep_states, []
@@ -173,11 +178,8 @@ class ArmSimCore:
             return
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
 
-    def _step_ns(self) -> int:
-        return round(self.sim.step_size * 1e9)
-
     def stamp_ns(self) -> int:
-        return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * self._step_ns()
+        return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
 
     def joint_state(self) -> JointStateData:
         """Positions, velocities and the torque the joints receive (after gearing, windings
@@ -188,14 +190,13 @@ class ArmSimCore:
                               self.config.values["joint_names"], [y[0], y[1]], [y[2], y[3]],
                               [float(tau[0]), float(tau[1])])
 
-    def reset(self) -> None:
-        """Back to the scene's initial state; stamps keep increasing."""
+    def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")
 
-    def _restart(self, config: NodeConfig, why: str) -> None:
+    def _restart(self, config: NodeConfig, why: str, sim: Simulator | None = None) -> None:
         self.recorder.hand_over()         # they belong to the simulator about to go
-        self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
-        self._configure(config)
+        self._elapsed_before_reset_ns += self.sim.steps * round(self.sim.step_size * 1e9)
+        self._configure(config, sim)
         self.recorder.start(self.sim)
         self._event(why)
 
@@ -211,10 +212,10 @@ class ArmSimCore:
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
                                                          self.refused_commands, self.late_ticks)
-        level, message = health(self.held, new_refused, new_late)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
                                    {name: getattr(self, name) for name in COUNTERS})
+        level, message = health(self.held, new_refused, new_late)
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
 

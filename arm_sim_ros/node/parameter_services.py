@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused
+from .parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused, shorten
 
 # rcl_interfaces/msg/ParameterType
 (NOT_SET, BOOL, INTEGER, DOUBLE, STRING, BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY,
@@ -126,6 +126,7 @@ class ParameterServices:
         return SetResult(True)
 
     def _refused(self, reason: str) -> SetResult:
+        reason = shorten(reason)
         self.log.warning(reason)
         return SetResult(False, reason)
 

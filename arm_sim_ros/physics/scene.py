@@ -15,7 +15,7 @@ from .. import yaml_files
 from .accuracy import DEFAULT_TOLERANCE
 from .effects import BUILDERS, MAPPING_EFFECTS, POLICIES, EffortLimits, JointLimits, Motors, validate
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
-from .model import PAIR_FIELDS, ArmParameters, ParameterError
+from .model import PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
 MAX_INITIAL_ANGLE = 1e6   # rad
@@ -185,20 +185,20 @@ def coerce_value(name: str, kind: str, value):
         return values
     if kind == "str":
         if not isinstance(value, str):
-            raise SceneError(f"{name} must be text, got {value!r}")
+            raise SceneError(f"{name} must be text, got {brief(value)}")
         return value
     if kind == "pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            raise SceneError(f"{name} must be a list of two numbers, got {value!r}")
+            raise SceneError(f"{name} must be a list of two numbers, got {brief(value)}")
         if len(value) != 2:
             raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
         return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{name} must be a number, got {str(value)[:60]!r}")
+        raise SceneError(f"{name} must be a number, got {brief(value, 60)}")
     try:
         value = float(value)
     except OverflowError:
-        raise SceneError(f"{name} = {str(value)[:20]}... is beyond the largest double") from None
+        raise SceneError(f"{name} = {brief(value, 20)} is beyond the largest double") from None
     if not isfinite(value):
         raise SceneError(f"{name} = {value} is not finite")
     return value

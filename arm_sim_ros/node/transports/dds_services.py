@@ -38,7 +38,7 @@ from . import dds_service_types as t
 
 REPLY_WAIT = 2.0          # s a reply waits for its client's reply reader to be matched
 PARAMETERS_DEPTH = 1000   # rmw_qos_profile_parameters / rmw_qos_profile_parameter_events
-SERVICES_DEPTH = 10       # rmw_qos_profile_services_default
+WAIT_SLICE = 0.1          # s a wait blocks at most (Python handles signals between waits)
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
@@ -171,7 +171,9 @@ class DdsServices:
         self.endpoints = [
             ServiceEndpoint(participant, check_topic_name(resolve(f"~/{service}"), "service name"),
                             request, reply, handler,
-                            SERVICES_DEPTH if service == "reset" else PARAMETERS_DEPTH,
+                            # ~/reset keeps as many as the parameter services (rmw: 10), so
+                            # that a burst of 200/s loses none between two polls
+                            PARAMETERS_DEPTH,
                             cs_id(guid, index + 1))
             for index, (service, request, reply, handler) in enumerate(services)]
         self.waitset = WaitSet(participant)
@@ -222,7 +224,7 @@ class DdsServices:
         """Wait `seconds` (wall time), answering requests as they arrive."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
-            wait = min(left, 0.005) if self.pending else left
+            wait = min(left, 0.005 if self.pending else WAIT_SLICE)   # signals between waits
             self.waitset.wait(duration(seconds=wait))
             self.poll()
 
