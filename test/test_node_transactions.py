@@ -183,3 +183,31 @@ def test_reset_requests_at_200_per_second_are_all_answered():
         spinner.join()
     assert sorted(r.seq for r in received) == list(range(1, sent + 1))
     assert all(r.success for r in received)
+
+
+# --- one recording stream per node ----------------------------------------------------------
+
+def native_threads():
+    return len(os.listdir("/proc/self/task"))
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in /proc")
+def test_a_recording_node_keeps_its_threads_across_live_changes_and_new_files(tmp_path):
+    from rerun.chunk import RrdReader
+
+    core = core_of(rerun_path=str(tmp_path / "arm0.rrd"))
+    for i in range(5):                      # warm up: the sender thread, rerun's own
+        core.set_parameters({"damping": 0.1 * i, "rerun_path": str(tmp_path / f"w{i}.rrd")})
+        core.tick()
+    threads = native_threads()
+    for i in range(40):
+        core.set_parameters({"damping": 0.5 + 0.1 * (i % 2)})
+        core.set_parameters({"friction.coulomb": [0.1, 0.1] if i % 2 else None})
+        core.set_parameters({"rerun_path": str(tmp_path / f"arm{i + 1}.rrd")})
+        core.tick()
+    assert native_threads() <= threads + 2    # rerun once leaked 4 a change (rerun#2116)
+    core.finish()
+    # every file the node left is closed and reads back, the scene's rows in it
+    for i in (1, 20, 40):
+        paths = {chunk.entity_path for chunk in RrdReader(str(tmp_path / f"arm{i}.rrd")).stream()}
+        assert "/joints/angle" in paths

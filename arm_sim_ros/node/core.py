@@ -87,9 +87,7 @@ class ArmSimCore:
         else:
             self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
-            self.recorder.finish()
-            self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim,
-                                         stamp_origin_ns=self.start_stamp_ns)
+            self.recorder = self.recorder.reopen(config)
         return changed
 
     def _event(self, text: str) -> None:

@@ -10,6 +10,7 @@ import sys
 from urllib.parse import urlsplit
 
 import rerun as rr
+from rerun import bindings
 
 DEFAULT_PORT = 9876
 
@@ -60,8 +61,37 @@ def open_sinks(stream, board, opened: list, warn_once, path=None, spawn=False,
             warn_once("connect", f"rerun: no viewer answers at {url}; running on "
                                  "without it (start `rerun` first)")
     if sinks:
-        rr.set_sinks(*sinks, default_blueprint=board, recording=stream)
+        bindings.set_sinks(sinks, default_blueprint=blueprint_storage(stream, board),
+                           recording=stream.to_native())
     return bool(sinks)
+
+
+# rerun 0.41 builds every blueprint it sends (rr.set_sinks, rr.send_blueprint) on a new
+# native stream that it frees only at exit (rerun#2116): two threads and their buffers per
+# blueprint. A node that changes its layout or its file 100 times a second would grow by
+# hundreds of threads, so each application's blueprints go through one stream, reused.
+_BLUEPRINT_STREAMS: dict = {}
+
+
+def blueprint_storage(stream, board):
+    """`board` as the storage rerun's bindings send, built on the application's one
+    blueprint stream (as rerun.blueprint.api.create_in_memory_blueprint builds it)."""
+    application_id = stream.get_application_id()
+    blueprint_stream = _BLUEPRINT_STREAMS.get(application_id)
+    if blueprint_stream is None:
+        blueprint_stream = _BLUEPRINT_STREAMS[application_id] = rr.RecordingStream._from_native(
+            bindings.new_blueprint(application_id=application_id, make_default=False,
+                                   make_thread_default=False, default_enabled=True))
+    memory = blueprint_stream.memory_recording()   # the sink this blueprint alone goes to
+    blueprint_stream.set_time("blueprint", sequence=0)
+    board.to_blueprint()._log_to_stream(blueprint_stream)
+    return memory.storage
+
+
+def send_blueprint(stream, board) -> None:
+    """rr.send_blueprint(board, recording=stream) without a new stream per call."""
+    bindings.send_blueprint(blueprint_storage(stream, board), True, True,
+                            recording=stream.to_native())
 
 
 def _spawn_viewer(stream, sinks, opened, warn_once) -> None:
