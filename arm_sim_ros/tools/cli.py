@@ -16,7 +16,7 @@ from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
 from ..recording.readouts import error_books, held_by
-from ..outputs import check_output, clear_output, strict_json
+from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
 from .progress import Progress
@@ -89,19 +89,25 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     return largest
 
 
-def check_run_outputs(args) -> None:
-    """Every output of `run` checked by one rule before any work (outputs.check_output)."""
+def check_run_outputs(args) -> list:
+    """Every output of `run` checked by one rule before any work (outputs.check_output), and
+    the files claimed (outputs.claim_output); returns the paths claimed."""
     if args.publish_rate is not None and not args.bag:
         raise UsageError("--publish-rate sets the JointState rate of a --bag recording; "
                          "add --bag DIR, or leave it out")
     wanted = [(args.csv, "--csv", False, ()), (args.rerun, "--rerun", False, (".rrd",)),
               (args.bag, "--bag", True, ())]
-    paths = [check_output(path, option, args.force, directory, suffixes)
+    paths = [(check_output(path, option, args.force, directory, suffixes), option, directory)
              for path, option, directory, suffixes in wanted if path is not None]
-    for path in paths:
-        clear_output(path)
+    claimed = []
+    for path, option, directory in paths:
+        if args.force:        # only then: what it removes is what --force replaces
+            clear_output(path)
+        if not directory:     # the bag's directory is claimed by its mkdir
+            claimed += [path] if claim_output(path, option) else []
     if args.publish_rate is None:
         args.publish_rate = 100.0    # the default, applied here so that giving it is detectable
+    return claimed
 
 
 def cmd_run(args) -> int:
@@ -111,9 +117,14 @@ def cmd_run(args) -> int:
     duration = scene.duration if args.duration is None else parse_value("duration", args.duration)
     scene = scene.replace(duration=duration)
     scene.steps_for(duration)  # refuse before any file is opened
-    check_run_outputs(args)
     sim = Simulator(scene)
-    recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
+    claimed = check_run_outputs(args)
+    try:
+        recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
+    except BaseException:      # refused before the run: the files claimed go again
+        for path in claimed:
+            path.unlink(missing_ok=True)
+        raise
     with StopOnSignals() as stop, Progress(duration, f"arm-sim run {scene.name}") as progress:
         for recorder in recorders:
             recorder.start(sim)

@@ -1,0 +1,42 @@
+"""Every file `arm-sim run` writes is claimed exclusively before the run (as --bag's
+directory is by its mkdir): of two runs naming the same --csv or --rerun, the second is
+refused in one line and the first's file is left whole."""
+import pytest
+
+from arm_sim_ros import outputs
+from arm_sim_ros.tools import cli
+from arm_sim_ros.usage import UsageError
+
+
+@pytest.mark.parametrize("option, name", [("--csv", "run.csv"), ("--rerun", "run.rrd")])
+def test_a_second_run_on_the_same_file_is_refused_in_one_line(tmp_path, capsys, monkeypatch,
+                                                              option, name):
+    path = tmp_path / name
+    checked = cli.check_output
+
+    def other_run_claims_it_meanwhile(*args, **kwargs):
+        result = checked(*args, **kwargs)   # both runs found the name free...
+        path.write_bytes(b"the other run's rows\n")   # ...and the other one opened it first
+        return result
+
+    monkeypatch.setattr(cli, "check_output", other_run_claims_it_meanwhile)
+    code = cli.main(["run", "--scene", "release", "--duration", "0.1", option, str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "another run" in err
+    assert path.read_bytes() == b"the other run's rows\n"
+
+
+def test_a_claim_is_exclusive_and_a_device_is_never_claimed(tmp_path):
+    path = tmp_path / "a.csv"
+    assert outputs.claim_output(str(path), "--csv") and path.read_bytes() == b""
+    with pytest.raises(UsageError, match="another run"):
+        outputs.claim_output(str(path), "--csv")
+    assert not outputs.claim_output("/dev/null", "--csv")
+
+
+def test_a_run_refused_after_the_claim_leaves_no_empty_file(tmp_path, capsys):
+    csv_path, bag = tmp_path / "run.csv", tmp_path / "bag"
+    # a publish rate that does not divide the step is refused by the bag, after the claim
+    code = cli.main(["run", "--scene", "release", "--duration", "0.1", "--csv", str(csv_path),
+                     "--bag", str(bag), "--publish-rate", "33"])
+    assert code == 2 and not csv_path.exists()
