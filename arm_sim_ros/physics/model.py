@@ -16,6 +16,16 @@ class ParameterError(ValueError):
     """A physical parameter set that cannot describe a real arm."""
 
 
+def arithmetic_fault(error: ArithmeticError | ValueError) -> str:
+    """What an arithmetic error in a step means for the arm, in its words rather than
+    Python's ("math domain error", "float division by zero", "math range error")."""
+    if isinstance(error, ZeroDivisionError):
+        return "a quantity divided by one that vanished (a singular mass matrix or a zero rate)"
+    if isinstance(error, OverflowError):
+        return "a velocity, torque or energy beyond double precision (1.8e308)"
+    return "an angle or velocity beyond what sin, cos and sqrt can take (the state left the doubles)"
+
+
 BRIEF = 200   # characters of a refused value a message shows
 
 

@@ -186,7 +186,7 @@ class Simulator:
             y = (books.plain if self.steps < books.due else books.check)(
                 self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
-            self._refuse(f"cannot be taken: {error}")
+            self._refuse(f"cannot be taken: {model.arithmetic_fault(error)}")
         else:
             total = sum(y)
             if total - total == 0.0 or all(isfinite(v) for v in y):  # inf - inf, NaN are NaN
