@@ -108,6 +108,6 @@ def _finite_or_none(value):
 def _is_stream(p: Path) -> bool:
     try:
         mode = os.stat(p).st_mode
-    except OSError:
+    except (OSError, ValueError):      # ValueError: a NUL in the name (no such file either)
         return False
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)

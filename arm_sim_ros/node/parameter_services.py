@@ -121,6 +121,10 @@ class ParameterServices:
             self.core.set_parameters(dict(parameters))
         except ParameterRefused as refusal:
             return self._refused(str(refusal))
+        except Exception as error:   # noqa: BLE001 - a bug must not leave a client unanswered
+            self.log.error(f"set_parameters {names}: {type(error).__name__}: {error}")
+            return self._refused(f"parameters {', '.join(names)} refused: the node could not "
+                                 f"apply them ({type(error).__name__}); nothing changed")
         if self.on_set is not None:
             self.on_set(list(dict.fromkeys(names)))
         return SetResult(True)

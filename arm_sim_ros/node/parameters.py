@@ -14,7 +14,7 @@ from ..physics.effects.base import REQUIRED
 from ..physics import urdf
 from ..physics.model import BRIEF, ParameterError, brief
 from ..outputs import check_output
-from ..usage import UsageError
+from ..usage import UsageError, one_line
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
@@ -25,7 +25,7 @@ class ParameterRefused(ValueError):
     """A parameter value the node will not take; str() names the parameter and the reason."""
 
     def __init__(self, name: str, reason: str):
-        reason = shorten(reason)        # a 100 KB value must not make a 100 KB log line
+        reason = shorten(one_line(reason))   # one log line, never a 100 KB one
         super().__init__(f"parameter {brief(name, 60)} refused: {reason}")
         self.name, self.reason = name, reason
 
@@ -274,6 +274,8 @@ def check_rerun_path(path: str) -> None:
     `arm-sim run --rerun` checks it (outputs.check_output); the node never replaces a file."""
     if not path:
         return
+    if "\x00" in path:
+        raise ParameterRefused("rerun_path", "a file name cannot hold a NUL character")
     if os.path.lexists(path) and not os.path.isdir(path):
         raise ParameterRefused("rerun_path", f"{path} exists already; choose a new name "
                                "(a recording is never replaced)")
