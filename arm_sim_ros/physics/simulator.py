@@ -172,6 +172,10 @@ class Simulator:
         return self.accuracy.accumulated(self.steps)
 
     @property
+    def confirmed(self) -> bool:      # the state now found sound: earlier ones are final
+        return self.state is self._sound
+
+    @property
     def holding(self) -> bool:
         """True while the latest step was refused and the state is the last finite one."""
         return self.refused_steps > 0 and self._refused_step == self.steps - 1

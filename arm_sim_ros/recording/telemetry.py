@@ -120,21 +120,22 @@ class RerunRecorder:
         """After a physics step: keep its state and its error books (see step_batch)."""
         self.step_batch(sim, (sim.state,))
 
-    def step_batch(self, sim, states, books=()) -> None:
-        """After len(states) physics steps: their states in order, the last being sim.state,
+    def step_batch(self, sim, states, books=(), last=None) -> None:
+        """After len(states) physics steps: their states in order, the last being sim.state
+        (or that of step `last`: the rows before a stretch the divergence check retracted),
         taken under the command sim holds now (the node hands its steps over before a new
         command). The node calls this every 10 steps, `arm-sim run` every 1000; the states
         are copied, so the caller may reuse the list; `books`: the error books of every
         books_every-th step among them (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
             self._bind(sim)
-        n = len(states)
+        n, last = len(states), sim.steps if last is None else last   # last: a retraction after
         if n == 0:
             return
         snap = self._snapshot     # None: it could not be made, and telemetry is off
-        extend_runs(self._runs, sim.steps - n + 1,
+        extend_runs(self._runs, last - n + 1,
                     tuple(sim.dynamics.command) if snap and snap.commanded else None, n)
-        self._next = sim.steps + 1
+        self._next = last + 1
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
         self._books.fromlist(with_last(books, sim))
         self._waiting += n

@@ -19,6 +19,7 @@ from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
+from .confirmed import ConfirmedSteps
 from .progress import Progress
 from .signals import StopOnSignals
 
@@ -56,32 +57,23 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
     (its .requested set by a signal): every recorder has then seen the same last step.
-    Returns the largest |residual| seen."""
+    A step reaches the recorders only once the divergence check has confirmed it; steps it
+    retracts never do (tools/confirmed.py). Returns the largest |residual| seen."""
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    states, books = [], []
-    keep, book = states.append, books.extend
-    every = min((r.books_every for r in batched), default=0)
-
-    def on_step(s):
-        if batched:               # only a recorder with step_batch needs them collected
-            keep(s.state)
-            if s.steps % every == 0:
-                book(error_books(s))
-        for step in each:
-            step(s)
+    # rows are held until the divergence check confirms them (tools/confirmed.py)
+    steps = ConfirmedSteps(sim, each, bool(batched),
+                           min((r.books_every for r in batched), default=0))
 
     largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
     end = sim.time + duration
     while left > 0 and not (stop is not None and stop.requested):
-        steps = min(left, chunk)
+        count = min(left, chunk)
         started = time.perf_counter()
-        largest = max(largest, sim.run(steps * sim.step_size, on_step if recorders else None))
-        for recorder in batched:
-            recorder.step_batch(sim, states, books)
-        states.clear()
-        books.clear()
-        left -= steps
+        largest = max(largest, sim.run(count * sim.step_size,
+                                       steps.on_step if recorders else None))
+        steps.hand_over(batched)
+        left -= count
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
             chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)
         if progress is not None:
