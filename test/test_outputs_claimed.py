@@ -40,3 +40,27 @@ def test_a_run_refused_after_the_claim_leaves_no_empty_file(tmp_path, capsys):
     code = cli.main(["run", "--scene", "release", "--duration", "0.1", "--csv", str(csv_path),
                      "--bag", str(bag), "--publish-rate", "33"])
     assert code == 2 and not csv_path.exists()
+
+
+def test_a_full_disk_under_rerun_ends_in_an_error_a_nonzero_exit_and_a_readable_file(tmp_path):
+    """rerun only logs a write the disk refuses; the run checks the file at its end, cuts it
+    back to its whole messages and says so (a file-size limit stands in for a full disk)."""
+    import resource
+    import subprocess
+    import sys
+
+    from rerun.chunk import RrdReader
+
+    path = tmp_path / "run.rrd"
+
+    def small_disk():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
+
+    run = subprocess.run([sys.executable, "-m", "arm_sim_ros.tools.cli", "run", "--duration", "30",
+                          "--rerun", str(path)], preexec_fn=small_disk, capture_output=True,
+                         text=True, timeout=120)
+    ours = [line for line in run.stderr.splitlines() if line.startswith("arm-sim: error")]
+    assert run.returncode == 2 and len(ours) == 1 and "cut back" in ours[0]
+    assert "Traceback" not in run.stderr
+    entities = {chunk.entity_path for chunk in RrdReader(str(path)).stream()}
+    assert "/energy/balance_residual" in entities   # what fit reads back

@@ -43,7 +43,7 @@ from .arm3d import arm3d_for
 from .blueprint import blueprint, effects_document, styles
 from .properties import send_properties
 from .readouts import Snapshot, error_books, held_by
-from .sinks import open_sinks, send_blueprint
+from .sinks import check_rrd_file, open_sinks, send_blueprint
 from .writer import BatchWriter
 
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
@@ -191,6 +191,8 @@ class RerunRecorder:
             self._guard(self.stream.flush, timeout_sec=FLUSH_TIMEOUT)
             self._guard(self.stream.disconnect)
         self.enabled = False
+        if self.path and self.sinks:
+            check_rrd_file(self.path)         # a full disk: cut to whole messages, one line
 
     # -- binding a simulator --------------------------------------------------------------
 
