@@ -33,7 +33,8 @@ def test_rows_between_the_last_sound_check_and_a_diverged_one_reach_no_output(
     code = cli.main(["run", "--scene", "damped_release", "--duration", "2", "--set", "tolerance=0",
                      "--csv", str(paths["csv"]), "--rerun", str(paths["rerun"]),
                      "--bag", str(paths["bag"])])
-    assert code == 1 and "diverged (as this test says)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 1 and "diverged (as this test says)" in err, err
     retracted = set(range(sound + 1, found))
 
     with open(paths["csv"]) as file:

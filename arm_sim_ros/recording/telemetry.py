@@ -129,15 +129,15 @@ class RerunRecorder:
         books_every-th step among them (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
             self._bind(sim)
-        n, last = len(states), sim.steps if last is None else last   # last: a retraction after
+        n, end = len(states), sim.steps if last is None else last   # last: a retraction after
         if n == 0:
             return
         snap = self._snapshot     # None: it could not be made, and telemetry is off
-        extend_runs(self._runs, last - n + 1,
+        extend_runs(self._runs, end - n + 1,
                     tuple(sim.dynamics.command) if snap and snap.commanded else None, n)
-        self._next = last + 1
+        self._next = end + 1
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
-        self._books.fromlist(with_last(books, sim))
+        self._books.fromlist(with_last(books, sim) if last is None else list(books))
         self._waiting += n
         if self._waiting >= self._check_at:
             self.flush()
@@ -187,7 +187,7 @@ class RerunRecorder:
         self._sender.close()
         if self.sim is not None and self._on_sim_event in self.sim.event_listeners:
             self.sim.event_listeners.remove(self._on_sim_event)
-        if self.enabled:
+        if self.sinks:                        # closed even after a failure: a whole file
             self._guard(self.stream.flush, timeout_sec=FLUSH_TIMEOUT)
             self._guard(self.stream.disconnect)
         self.enabled = False
