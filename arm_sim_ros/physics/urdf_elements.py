@@ -6,6 +6,7 @@ from math import isfinite, sqrt
 
 import numpy as np
 
+from .model import brief
 from .scene import SceneError
 
 
@@ -31,9 +32,9 @@ def read_number(element, key, where, default=None) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise SceneError(f"URDF: {where} {key}={text!r} is not a number") from None
+        raise SceneError(f"URDF: {where} {key}={brief(text)} is not a number") from None
     if not isfinite(value):
-        raise SceneError(f"URDF: {where} {key}={text!r} is not finite")
+        raise SceneError(f"URDF: {where} {key}={brief(text)} is not finite")
     return value
 
 
@@ -46,7 +47,7 @@ def read_vector(element, key, where, default) -> np.ndarray:
     except ValueError:
         values = []
     if len(values) != 3 or not all(isfinite(v) for v in values):
-        raise SceneError(f"URDF: {where} {key}={text!r} is not three finite numbers")
+        raise SceneError(f"URDF: {where} {key}={brief(text)} is not three finite numbers")
     return np.array(values)
 
 
