@@ -211,3 +211,26 @@ def test_a_recording_node_keeps_its_threads_across_live_changes_and_new_files(tm
     for i in (1, 20, 40):
         paths = {chunk.entity_path for chunk in RrdReader(str(tmp_path / f"arm{i}.rrd")).stream()}
         assert "/joints/angle" in paths
+
+
+def test_live_changes_a_recording_does_not_show_go_on_in_one_batch(tmp_path):
+    """Damping set 30 times between ticks: the rows before and after each change read alike
+    (energies, books and torque do not depend on its value), so they are sent together, not
+    ~20 chunks per change, and every row reads back with the simulator's books."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from rerun.chunk import RrdReader
+    from test_telemetry import read_back
+
+    path = tmp_path / "arm.rrd"
+    core = core_of(rerun_path=str(path), publish_rate=100.0)
+    for i in range(30):
+        core.set_parameters({"damping": 0.5 + 0.1 * (i % 2)})
+        core.tick()
+    final_residual, steps = core.sim.residual(), core.sim.steps
+    core.finish()
+    chunks = sum(1 for chunk in RrdReader(str(path)).stream() if not chunk.is_static)
+    assert chunks < 5 * 30                      # once: ~20 per change
+    rows = read_back(path)["energy/balance_residual"]
+    assert len(rows["sim_time"]) == steps + 1
+    assert rows["Scalars:scalars"][-1][0] == pytest.approx(final_residual, abs=1e-12)

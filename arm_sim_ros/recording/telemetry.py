@@ -42,7 +42,7 @@ import rerun as rr
 from .arm3d import arm3d_for
 from .blueprint import blueprint, effects_document, styles
 from .properties import send_properties
-from .readouts import Snapshot, error_books, held_by
+from .readouts import Snapshot, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks, send_blueprint
 from .writer import BatchWriter
 
@@ -122,11 +122,11 @@ class RerunRecorder:
 
     def step_batch(self, sim, states, books=(), last=None) -> None:
         """After len(states) physics steps: their states in order, the last being sim.state
-        (or that of step `last`: the rows before a stretch the divergence check retracted),
-        taken under the command sim holds now (the node hands its steps over before a new
-        command). The node calls this every 10 steps, `arm-sim run` every 1000; the states
-        are copied, so the caller may reuse the list; `books`: the error books of every
-        books_every-th step among them (module docstring). Nothing else happens (see flush)."""
+        (or step `last`'s: rows before a retracted stretch), taken under the command sim
+        holds now (the node hands its steps over before a new command). The node calls this
+        every 10 steps, `arm-sim run` every 1000; the states are copied, so the caller may
+        reuse the list; `books`: the error books of every books_every-th step among them
+        (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
             self._bind(sim)
         n, end = len(states), sim.steps if last is None else last   # last: a retraction after
@@ -197,12 +197,13 @@ class RerunRecorder:
     # -- binding a simulator --------------------------------------------------------------
 
     def _bind(self, sim) -> bool:
-        """Rows buffered so far belong to the previous simulator (or to sim's dynamics
-        before a live change): send them first. Returns whether sim carries on the run
-        (the same simulator, not reset), which keeps the run's E(0). The simulator's own
-        events (sub-stepping, refused steps) go to the text log."""
+        """Rows buffered so far belong to the previous simulator or dynamics: sent first,
+        unless they read alike. Returns whether sim carries on the run (the same simulator,
+        not reset: the run's E(0) kept). Its own events go to the text log."""
         previous = self.sim
         carried = sim is previous and sim.steps + 1 >= self._next
+        if carried and _alike_carried_on(self, sim):
+            return True
         if previous is not None:
             self.flush(force=True)
         initial = self._snapshot.initial if carried and self._snapshot is not None else None
@@ -258,6 +259,23 @@ class RerunRecorder:
         if key not in self._warned:
             self._warned.add(key)
             self._warn(message)
+
+
+def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
+    """A live change its rows do not show (readouts.reads_alike: damping, friction values):
+    the batch being filled goes on under the new snapshot, with no send of its own (a
+    slider at 100 changes/s would otherwise send ~20 small chunks per change, and rerun
+    keeps an index entry per chunk until the file closes). The static data follows."""
+    if recorder._snapshot is None:
+        return False
+    snap = Snapshot(sim, recorder._snapshot.initial)
+    if not reads_alike(recorder._snapshot, snap):
+        return False
+    snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
+    if recorder.enabled:
+        recorder._guard(recorder._static.send, recorder.stream, snap, sim, recorder.node,
+                        recorder.stamp_origin_ns)
+    return True
 
 
 class StaticData:
