@@ -64,3 +64,27 @@ def test_a_full_disk_under_rerun_ends_in_an_error_a_nonzero_exit_and_a_readable_
     assert "Traceback" not in run.stderr
     entities = {chunk.entity_path for chunk in RrdReader(str(path)).stream()}
     assert "/energy/balance_residual" in entities   # what fit reads back
+
+
+def test_text_lines_sent_without_rows_are_each_recorded(tmp_path):
+    """A batch of event lines and no steps (a live change between ticks) puts each line at
+    the last row sent; rerun refused the batch before (one time index for two lines)."""
+    import warnings
+
+    from arm_sim_ros.physics.scene import load_scene
+    from arm_sim_ros.physics.simulator import Simulator
+    from arm_sim_ros.recording.telemetry import make_recorder
+    from test_telemetry import read_back
+
+    sim, path = Simulator(load_scene("release")), tmp_path / "lines.rrd"
+    recorder = make_recorder(path=str(path))
+    recorder.start(sim)
+    recorder.flush(force=True)
+    recorder.event("first line")
+    recorder.event("second line")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        recorder.flush(force=True)
+        recorder.finish(sim)
+    texts = read_back(path)["events"]["TextLog:text"]
+    assert "first line" in texts and "second line" in texts
