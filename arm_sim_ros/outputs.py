@@ -43,6 +43,23 @@ def check_output(path: str, option: str, force: bool = False, directory: bool = 
     return p
 
 
+def claim_output(path, option: str) -> bool:
+    """Create `path` empty, exclusively (O_EXCL): of two runs naming the same file, the
+    second is refused in one line instead of splicing its rows into the first's. False for a
+    device or pipe, which is written as it is (nothing claimed)."""
+    p = Path(path)
+    if _is_stream(p):
+        return False
+    try:
+        os.close(os.open(p, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+    except FileExistsError:
+        raise UsageError(f"{option} {path} was created by another run meanwhile; choose a "
+                         "new name") from None
+    except OSError as error:
+        raise UsageError(f"{option} {path}: cannot write: {error.strerror}") from None
+    return True
+
+
 def clear_output(path) -> None:
     """Remove what --force replaces: a file, a symlink (not its target) or a bag directory."""
     p = Path(path)
@@ -91,6 +108,6 @@ def _finite_or_none(value):
 def _is_stream(p: Path) -> bool:
     try:
         mode = os.stat(p).st_mode
-    except OSError:
+    except (OSError, ValueError):      # ValueError: a NUL in the name (no such file either)
         return False
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)

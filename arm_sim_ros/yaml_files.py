@@ -13,6 +13,7 @@ import yaml
 from .usage import UsageError
 
 MAX_FILE_BYTES = 1_000_000
+MAX_INT_DIGITS = 400          # 1e308 has 309 digits: more is beyond the doubles
 
 # YAML 1.2 core schema floats: 1e-3, 1E3, .5, -2.5e+4, .inf, .nan.
 FLOAT_1_2 = re.compile(r"""^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?
@@ -32,7 +33,30 @@ class _Loader(yaml.SafeLoader):
                                               event.start_mark)
         return super().compose_node(parent, index)
 
+    def construct_mapping(self, node, deep=False):
+        """A key given twice is refused: PyYAML keeps the last silently, and a scene whose
+        damping is set twice would run on the one its author did not mean."""
+        seen = set()
+        for key_node, _ in node.value:
+            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+            if key is not None and key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"the key {key[:60]!r} is given twice", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
 
+    def construct_yaml_int(self, node):
+        """An integer too long for any physical quantity (Python refuses to read one of more
+        than 4300 digits) is refused with its place, not a traceback."""
+        digits = len(node.value.lstrip("+-").replace("_", ""))
+        if digits > MAX_INT_DIGITS:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"an integer of {digits} digits is beyond any double",
+                node.start_mark)
+        return super().construct_yaml_int(node)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
 _Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
 for first in "-+.0123456789":
     _Loader.yaml_implicit_resolvers[first] = [

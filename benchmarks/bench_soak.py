@@ -1,9 +1,12 @@
 """Soak: 10^7 simulator steps across long, fast and stiff runs, then a long node run on DDS
-with a command flood; finiteness, energy drift and resident memory before and after.
+with a command flood; finiteness, energy drift and resident memory before and after; then a
+node spinning in real time with a Rerun recording open while a client changes its live
+parameters 100 times a second: threads, RSS, JointState and replies per window.
 
 Not a test: wall times depend on what else the machine runs.
 
     python benchmarks/bench_soak.py [--scale 1.0] [--node-seconds 1800]
+                                    [--changes-seconds 30] [--changes-rate 100] [--only changes]
 """
 from __future__ import annotations
 
@@ -104,13 +107,100 @@ def node_soak(seconds: float) -> None:
     node.close()
 
 
+def threads() -> int:
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("Threads:"))
+
+
+# Live values a slider or a fuzzer sends in turn: the effects that change live, one that
+# restarts the scene, and ones the node refuses (a transaction that changes nothing).
+CHANGES = [("damping", [0.5, 0.1]), ("friction.coulomb", [[0.2, 0.1], [0.05, 0.05]]),
+           ("effort_limits", [[20.0, 10.0], [30.0, 15.0]]), ("payload.mass", [0.5, 0.0]),
+           ("controller_model.link_lengths", [[1.1, 0.9], [1e200, 1e200]]),
+           ("gravity", [9.81, 9.5]), ("real_time_factor", [1.0, 5e-324])]
+
+
+def changes_soak(seconds: float, rate: float, window: float = 5.0, record: bool = True) -> None:
+    """A node spinning as arm_sim_node spins it (real time, 100 Hz, recording to a .rrd) while
+    a client sends set_parameters at `rate`/s; one row per `window` s of wall time."""
+    import tempfile
+    import threading
+    from pathlib import Path
+
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    from arm_sim_ros.node import messages as msg
+    from arm_sim_ros.node.transports import dds_service_types as t
+    from arm_sim_ros.node.transports.dds import DdsArmSimNode
+    from arm_sim_ros.node.transports.dds_services import cs_id, endpoint_qos, to_value
+    from arm_sim_ros.node.parameter_services import DOUBLE, DOUBLE_ARRAY
+
+    domain, folder = 78, Path(tempfile.mkdtemp(prefix="arm_sim_soak_"))
+    node = DdsArmSimNode({"damping": 0.5, "rerun_path": str(folder / "soak.rrd") if record else ""},
+                         domain_id=domain, config=msg.LOOPBACK_CONFIG,
+                         log=logging.getLogger("soak.changes"))
+    logging.getLogger("soak.changes").setLevel(logging.ERROR)   # refusals by the thousand
+    peer = msg.make_participant(domain, msg.LOOPBACK_CONFIG)
+    ids = f"clientid={cs_id(peer.guid.bytes, 1)};"
+    request = DataWriter(peer, Topic(peer, "rq/arm_sim/set_parametersRequest",
+                                     t.SetParametersRequest),
+                         qos=endpoint_qos(t.SetParametersRequest, 1000, ids))
+    replies = DataReader(peer, Topic(peer, "rr/arm_sim/set_parametersReply",
+                                     t.SetParametersResponse),
+                         qos=endpoint_qos(t.SetParametersResponse, 1000, ids))
+    states = DataReader(peer, Topic(peer, "rt/joint_states", msg.JointState),
+                        qos=msg.default_qos(msg.JointState, depth=1000))
+    while not (msg.matched(request) and msg.matched(replies) and msg.matched(states)):
+        time.sleep(0.01)
+    spinner = threading.Thread(target=lambda: node.spin(seconds + 2 * window))
+    spinner.start()
+    guid, seq, rng = request.get_instance_handle() & ((1 << 64) - 1), 0, random.Random(3)
+    print(f"\nlive parameter changes on DDS: {rate:g}/s for {seconds:g} s, the node "
+          f"{'recording to a .rrd' if record else 'not recording'}, publish_rate 100 in real time")
+    print(f"{'wall s':>6s} {'threads':>7s} {'RSS MB':>7s} {'JointState/s':>12s} "
+          f"{'replies/s':>9s} {'refused':>7s}")
+    start = next_row = time.monotonic()
+    counts = {"states": 0, "replies": 0, "refused": 0}
+    while (now := time.monotonic()) - start < seconds:
+        name, values = rng.choice(CHANGES)
+        value = rng.choice(values)
+        kind = DOUBLE_ARRAY if isinstance(value, list) else DOUBLE
+        seq += 1
+        request.write(t.SetParametersRequest(guid=guid, seq=seq, parameters=[
+            t.Parameter(name, to_value(kind, value))]))
+        for reply in replies.take(N=1000):
+            if isinstance(reply, t.SetParametersResponse):
+                counts["replies"] += 1
+                counts["refused"] += not reply.results[0].successful
+        counts["states"] += sum(isinstance(s, msg.JointState) for s in states.take(N=1000))
+        if now >= next_row:
+            span = window if now > start else 1.0
+            print(f"{now - start:6.0f} {threads():7d} {rss_mb():7.1f} "
+                  f"{counts['states'] / span:12.0f} {counts['replies'] / span:9.0f} "
+                  f"{counts['refused']:7d}", flush=True)
+            counts, next_row = dict.fromkeys(counts, 0), next_row + window
+        time.sleep(max(0.0, start + seq / rate - time.monotonic()))
+    spinner.join()
+    node.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scale", type=float, default=1.0, help="fraction of the 10^7 steps")
     parser.add_argument("--node-seconds", type=float, default=1800.0)
+    parser.add_argument("--changes-seconds", type=float, default=30.0)
+    parser.add_argument("--changes-rate", type=float, default=100.0)
+    parser.add_argument("--only", choices=("simulator", "node", "changes"))
     args = parser.parse_args()
-    simulator_soak(args.scale)
-    node_soak(args.node_seconds)
+    if args.only in (None, "simulator"):
+        simulator_soak(args.scale)
+    if args.only in (None, "node"):
+        node_soak(args.node_seconds)
+    if args.only in (None, "changes"):
+        changes_soak(args.changes_seconds, args.changes_rate, record=False)
+        changes_soak(args.changes_seconds, args.changes_rate)
 
 
 if __name__ == "__main__":

@@ -206,12 +206,16 @@ ISOLATED = wire.LOOPBACK_CONFIG.replace(
 
 def writer_for(participant, topic, message_type, qos=None):
     """A reliable writer that keeps every sample until acknowledged: a keep-last writer may
-    replace an unacknowledged sample in a burst, a loss the recorder could never see."""
+    replace an unacknowledged sample in a burst, a loss the recorder could never see. A write
+    waits for room as long as a busy machine needs (the default 100 ms made write() time out
+    once in 7 suite runs while the recorder's process was starved)."""
     from cyclonedds.pub import DataWriter
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
 
-    qos = (qos or wire.default_qos(message_type)) + Qos(Policy.History.KeepAll)
+    qos = (qos or wire.default_qos(message_type)) + Qos(
+        Policy.History.KeepAll, Policy.Reliability.Reliable(max_blocking_time=duration(seconds=60)))
     return DataWriter(participant, Topic(participant, wire.ros_topic(topic), message_type), qos=qos)
 
 
@@ -372,7 +376,7 @@ def test_an_interrupted_recorder_leaves_a_readable_bag_with_everything_received(
         sent = joint_states(600)  # more than one take() batch
         for message in sent:
             writer.write(message)
-        assert writer.wait_for_acks(5_000_000_000)  # in the recorder's reader, not yet on disk
+        assert writer.wait_for_acks(60_000_000_000)  # in the recorder's reader, not yet on disk
         process.send_signal(signum)
         out, err = process.communicate(timeout=20)
     finally:

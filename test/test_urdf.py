@@ -15,6 +15,7 @@ from arm_sim_ros.node.parameters import SPECS, ParameterRefused, resolve_paramet
 from arm_sim_ros.physics.model import (ArmParameters, gravity_torque, link_points, mass_matrix,
                                        potential_energy)
 from arm_sim_ros.physics.scene import MAX_INITIAL_ANGLE, Scene, SceneError, load_scene, preset_names
+from arm_sim_ros.physics import urdf
 from arm_sim_ros.physics.urdf import NO_EFFORT_LIMIT, read_urdf, scene_from_urdf
 from arm_sim_ros.physics.urdf_out import scene_to_urdf
 from arm_sim_ros.tools import cli
@@ -341,3 +342,27 @@ def test_a_robot_description_that_is_not_a_planar_2r_arm_is_refused_naming_it():
 def test_robot_description_is_chosen_at_start():
     with pytest.raises(ParameterRefused, match="robot_description"):
         resolve_parameters({}).with_changes({"robot_description": OTHER})
+
+
+# --- size: a description is bounded, and read in time linear in its links ----------------------
+
+def _with_fixed_chain(count):
+    text = (ROOT / "urdf" / "two_link_arm.urdf").read_text()
+    chain = "".join(
+        f'<link name="f{i}"/><joint name="jf{i}" type="fixed"><parent link="'
+        f'{"f%d" % (i - 1) if i else "link2"}"/><child link="f{i}"/></joint>'
+        for i in range(count))
+    return text.replace("</robot>", chain + "</robot>")
+
+
+def test_a_urdf_beyond_the_size_caps_is_refused_in_one_line():
+    with pytest.raises(SceneError, match="20005 links"):
+        urdf.read_urdf(_with_fixed_chain(20_000))
+    with pytest.raises(SceneError, match="characters"):
+        urdf.read_urdf("<robot>" + " " * (urdf.MAX_URDF_CHARS + 1) + "</robot>")
+
+
+def test_a_long_chain_of_fixed_links_is_read_as_the_arm_without_them():
+    plain = urdf.read_urdf((ROOT / "urdf" / "two_link_arm.urdf").read_text())
+    chained = urdf.read_urdf(_with_fixed_chain(urdf.MAX_LINKS - 10))
+    assert chained.link_masses == plain.link_masses and chained.joint_names == plain.joint_names

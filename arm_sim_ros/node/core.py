@@ -21,6 +21,7 @@ from .command_input import CommandInput
 from .commands import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
 from .parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
+from .rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
 from .status import Interval, health, status_line
 
@@ -30,8 +31,7 @@ class ArmSimCore(CommandInput):
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
                  start_stamp_ns: int | None = None, recorder=None):
-        self.log = log
-        self.wall_clock = wall_clock
+        self.log, self.wall_clock = log, wall_clock
         self.start_stamp_ns = clock_origin_ns(config, start_stamp_ns)
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
@@ -52,9 +52,10 @@ class ArmSimCore(CommandInput):
     command_timeouts = property(lambda self: self.commands.timeouts)
     command = property(lambda self: self.commands.value)
 
-    def _configure(self, config: NodeConfig) -> None:
+    def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
+        """`config` with `sim` (default: built now) from its initial state."""
+        self.sim = build_simulator(config, SPECS) if sim is None else sim
         self.config = config
-        self.sim = Simulator(config.scene)
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
         self.sim.event_listeners.append(self._on_sim_event)
@@ -67,28 +68,30 @@ class ArmSimCore(CommandInput):
 
     def _on_sim_event(self, event) -> None:
         """What the simulator does later reaches the log as it happens (a fault: _advance)."""
+        text = f"{event.message} (at t = {event.t:.6f} s)"
         if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
-            (self.log.info if event.kind == "switch" else self.log.error)(
-                f"{event.message} (at t = {event.t:.6f} s)")
+            (self.log.info if event.kind == "switch" else self.log.error)(text)
         elif event.kind != "fault":
-            self.warnings.warning(event.kind, f"{event.message} (at t = {event.t:.6f} s)")
+            self.warnings.warning(event.kind, text)
 
     def set_parameters(self, changes: dict) -> list:
-        """Apply runtime parameter changes; ParameterRefused leaves everything as it was.
-        Returns the names whose value changed. A change to the arm, the policy or the
-        integration restarts the scene; one to a live effect (LIVE) carries on from now."""
+        """Runtime parameter changes as one transaction (rebuild.py): the new physics built
+        and checked aside, then swapped in; ParameterRefused (the physical reason) leaves
+        config, simulator and recording as they were. Returns the names whose value changed.
+        A change to the arm, the policy or the integration restarts the scene; one to a live
+        effect (LIVE) carries on from now; one to rerun_* closes the recording, opens anew."""
         config = self.config.with_changes(changes)
         changed = [n for n in SPECS if config.values[n] != self.config.values[n]]
-        if any(n in SCENE_PARAMETERS and n not in LIVE for n in changed):
+        restart = any(n in SCENE_PARAMETERS and n not in LIVE for n in changed)
+        # what reset would build must build: a value that cannot is refused here, not later
+        sim = build_simulator(config, changed) if restart or set(changed) & set(LIVE) else None
+        if restart:
             self._restart(config, f"parameters {', '.join(changed)} changed: scene restarted "
-                                  "from its initial state")
+                                  "from its initial state", sim)
         else:
-            self.config = config
-            self._change_physics([n for n in changed if n in LIVE])
+            self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
-            self.recorder.finish()
-            self.recorder = RecorderLink(self.log, make_recorder(config, self.log), self.sim,
-                                         stamp_origin_ns=self.start_stamp_ns)
+            self.recorder = self.recorder.reopen(config)
         return changed
 
     def _event(self, text: str) -> None:
@@ -101,19 +104,18 @@ class ArmSimCore(CommandInput):
         self.sim.set_command(tau1, tau2)
         servo.set_points(self.sim.dynamics, setpoints or {})
 
-    def _change_physics(self, names: list) -> None:
+    def _change_physics(self, config: NodeConfig, names: list) -> None:
         """Live effects changed: the new physics from the next step, state and books carried
-        over; the steps before reach the recorder first, and it learns the new channels."""
-        if not names:
-            return
+        over (rebuild.change_live); the steps before reach the recorder first, and it
+        learns the new channels."""
         self.recorder.hand_over()
-        if "payload.mass" in names:         # grasp (momentum kept) or release (velocity kept)
-            self.sim.set_payload(self.config.values["payload.mass"] or 0.0)
-        if names != ["payload.mass"]:          # a servo switched bumplessly (servo.py)
-            servo.change_scene(self.sim, self.config.scene.replace(payload=self.sim.scene.payload))
+        if names:          # the transaction (rebuild.py); a servo switches bumplessly
+            change_live(self.sim, config, names)
             self.commands.value = tuple(self.sim.dynamics.command)
-        self.recorder.start(self.sim)
-        self._event(live_change(names, self.config.values, self.sim.time))
+        self.config = config
+        if names:
+            self.recorder.start(self.sim)
+            self._event(live_change(names, config.values, self.sim.time))
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
@@ -121,9 +123,7 @@ class ArmSimCore(CommandInput):
         until the transport publishes them). Paused: the held state, time standing still."""
         if self.paused:
             return self.joint_state()
-        if self.config.values["lockstep"]:
-            return None
-        return self._tick(wall_now)
+        return None if self.config.values["lockstep"] else self._tick(wall_now)
 
     def step_ticks(self, count: int) -> list:
         """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""
@@ -166,11 +166,8 @@ class ArmSimCore(CommandInput):
             return
         self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
 
-    def _step_ns(self) -> int:
-        return round(self.sim.step_size * 1e9)
-
     def stamp_ns(self) -> int:
-        return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * self._step_ns()
+        return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
 
     def joint_state(self) -> JointStateData:
         """Positions, velocities and the torque the joints receive (after gearing, windings
@@ -181,14 +178,13 @@ class ArmSimCore(CommandInput):
                               self.config.values["joint_names"], [y[0], y[1]], [y[2], y[3]],
                               [float(tau[0]), float(tau[1])])
 
-    def reset(self) -> None:
-        """Back to the scene's initial state; stamps keep increasing."""
+    def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")
 
-    def _restart(self, config: NodeConfig, why: str) -> None:
+    def _restart(self, config: NodeConfig, why: str, sim: Simulator | None = None) -> None:
         self.recorder.hand_over()         # they belong to the simulator about to go
-        self._elapsed_before_reset_ns += self.sim.steps * self._step_ns()
-        self._configure(config)
+        self._elapsed_before_reset_ns += self.sim.steps * round(self.sim.step_size * 1e9)
+        self._configure(config, sim)
         self.recorder.start(self.sim)
         self._event(why)
 

@@ -51,6 +51,7 @@ class _RosFormatter(logging.Formatter):
 
 
 def run_dds(ros_argv: list, duration: float | None, status) -> int:
+    from .messages import close_domains
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
@@ -62,6 +63,7 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
         node.spin(duration, status)
     finally:
         node.close()
+        close_domains()      # Cyclone torn down now, in order, not by interpreter teardown
     return 0
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused
+from .parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused, shorten
 
 # rcl_interfaces/msg/ParameterType
 (NOT_SET, BOOL, INTEGER, DOUBLE, STRING, BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY,
@@ -121,11 +121,16 @@ class ParameterServices:
             self.core.set_parameters(dict(parameters))
         except ParameterRefused as refusal:
             return self._refused(str(refusal))
+        except Exception as error:   # noqa: BLE001 - a bug must not leave a client unanswered
+            self.log.error(f"set_parameters {names}: {type(error).__name__}: {error}")
+            return self._refused(f"parameters {', '.join(names)} refused: the node could not "
+                                 f"apply them ({type(error).__name__}); nothing changed")
         if self.on_set is not None:
             self.on_set(list(dict.fromkeys(names)))
         return SetResult(True)
 
     def _refused(self, reason: str) -> SetResult:
+        reason = shorten(reason)
         self.log.warning(reason)
         return SetResult(False, reason)
 

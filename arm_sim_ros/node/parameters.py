@@ -5,25 +5,35 @@ cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 from ..interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ..physics.effects import MAPPING_EFFECTS, EffortLimits
 from ..physics.effects.base import REQUIRED
 from ..physics import urdf
-from ..physics.model import ParameterError
+from ..physics.model import BRIEF, ParameterError, brief
+from ..outputs import check_output
+from ..usage import UsageError, one_line
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
+MAX_WALL_PERIOD = 3600.0          # wall s between ticks: slower is no longer a running node
 
 
 class ParameterRefused(ValueError):
     """A parameter value the node will not take; str() names the parameter and the reason."""
 
     def __init__(self, name: str, reason: str):
-        super().__init__(f"parameter {name!r} refused: {reason}")
+        reason = shorten(one_line(reason))   # one log line, never a 100 KB one
+        super().__init__(f"parameter {brief(name, 60)} refused: {reason}")
         self.name, self.reason = name, reason
+
+
+def shorten(text: str, limit: int = 3 * BRIEF) -> str:
+    """`text` cut to `limit` characters, saying how long it was."""
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} chars)"
 
 
 # When a parameter may change (main.py's --help prints it): the one place it is decided.
@@ -206,12 +216,12 @@ def coerce(spec: ParameterSpec, value):
         return list(value) if isinstance(value, tuple) else value
     if kind == "bool":
         if not isinstance(value, bool):
-            raise ParameterRefused(name, f"must be true or false, got {value!r}")
+            raise ParameterRefused(name, f"must be true or false, got {brief(value)}")
         return value
     if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-        raise ParameterRefused(name, f"must be a list, got {value!r}")
+        raise ParameterRefused(name, f"must be a list, got {brief(value)}")
     if not all(isinstance(v, str) for v in value):
-        raise ParameterRefused(name, f"must be a list of text, got {list(value)!r}")
+        raise ParameterRefused(name, f"must be a list of text, got {brief(list(value))}")
     return list(value)
 
 
@@ -248,7 +258,11 @@ class NodeConfig:
                 why = START_ONLY_WHY.get(name.partition(".")[0], "it is chosen at start")
                 raise ParameterRefused(name, f"{name} is start-only ({why}); restart the node "
                                        f"with -p {name}:=VALUE")
-        return _build(self.values | changes, load=lambda name: self.scene, changed=list(changes))
+        config = _build(self.values | changes, load=lambda name: self.scene,
+                        changed=list(changes))
+        if config.values["rerun_path"] != self.values["rerun_path"]:
+            check_rerun_path(config.values["rerun_path"])
+        return config
 
 
 def resolve_parameters(overrides: dict) -> NodeConfig:
@@ -257,7 +271,25 @@ def resolve_parameters(overrides: dict) -> NodeConfig:
     _check_known(overrides)
     values, scene = _defaults(*(coerce(SPECS[name], overrides.get(name, SPECS[name].default))
                                 for name in READ_ONLY))
-    return _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
+    config = _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
+    check_rerun_path(config.values["rerun_path"])
+    return config
+
+
+def check_rerun_path(path: str) -> None:
+    """A recording the node may start: a new .rrd in a writable directory, checked as
+    `arm-sim run --rerun` checks it (outputs.check_output); the node never replaces a file."""
+    if not path:
+        return
+    if "\x00" in path:
+        raise ParameterRefused("rerun_path", "a file name cannot hold a NUL character")
+    if os.path.lexists(path) and not os.path.isdir(path):
+        raise ParameterRefused("rerun_path", f"{path} exists already; choose a new name "
+                               "(a recording is never replaced)")
+    try:
+        check_output(path, "rerun_path", force=True, suffixes=(".rrd",))
+    except UsageError as error:
+        raise ParameterRefused("rerun_path", str(error)) from None
 
 
 def _check_known(names) -> None:
@@ -302,12 +334,12 @@ def _build(values: dict, load, changed) -> NodeConfig:
     try:
         scene = base.replace(**scene_values)
     except (SceneError, ParameterError) as error:
-        raise ParameterRefused(_blamed(str(error), changed), str(error)) from None
+        raise ParameterRefused(blamed(str(error), changed), str(error)) from None
     _check_node_values(values)
     return NodeConfig(values, scene, steps_per_tick(values["publish_rate"], scene.step_size))
 
 
-def _blamed(message: str, changed) -> str:
+def blamed(message: str, changed) -> str:
     """The parameter a scene error is about: of those it names, one just changed (the longest
     name: `joint_limits.damping` rather than `damping`); else a key just changed of an effect
     it names (`friction.static` when friction.coulomb is missing); else the first named or
@@ -335,10 +367,17 @@ def _check_node_values(values: dict) -> None:
     )
     for name, ok, reason in checks:
         if not ok:
-            raise ParameterRefused(name, f"{values[name]!r} {reason}")
+            raise ParameterRefused(name, f"{brief(values[name])} {reason}")
+    rtf, tick = values["real_time_factor"], 1.0 / values["publish_rate"]
+    if rtf and not tick / rtf <= MAX_WALL_PERIOD:      # 5e-324: the period is inf
+        raise ParameterRefused("real_time_factor", (
+            f"{rtf:g} would stretch one tick ({tick:g} s simulated) over {tick / rtf:.3g} s of "
+            f"wall time; at most {MAX_WALL_PERIOD:g} s: choose at least "
+            f"{tick / MAX_WALL_PERIOD:.3g}, or 0 (as fast as possible)"))
     joint_names = values["joint_names"]
     if not all(joint_names) or joint_names[0] == joint_names[1]:
-        raise ParameterRefused("joint_names", f"{joint_names} must be two distinct, non-empty names")
+        raise ParameterRefused("joint_names", f"{brief(joint_names)} must be two distinct, "
+                               "non-empty names")
 
 
 def steps_per_tick(rate: float, step_size: float) -> int:

@@ -22,15 +22,15 @@ from ..recording.readouts import error_books
 RECORD_EVERY = 10
 
 
-def make_recorder(config, log):
-    """The recorder the node's rerun_* parameters ask for, or None."""
+def make_recorder(config, log, stream=None):
+    """The recorder the node's rerun_* parameters ask for, or None; on `stream` if given."""
     if not config.telemetry_enabled:
         return None
     v = config.values
     try:
         from ..recording.telemetry import make_recorder as make  # heavy (rerun); only when asked
         return make(config.scene, path=v["rerun_path"] or None, spawn=v["rerun_spawn"],
-                    connect=v["rerun_connect"] or None, warn=log.warning)
+                    connect=v["rerun_connect"] or None, warn=log.warning, stream=stream)
     except Exception as error:  # telemetry must never stop the simulation
         log.error(f"Rerun telemetry is off: {error}")
         return None
@@ -39,6 +39,7 @@ def make_recorder(config, log):
 class RecorderLink:
     def __init__(self, log, recorder, sim, stamp_origin_ns: int | None = None):
         self.log, self.recorder, self.sim = log, recorder, sim
+        self.stream = getattr(recorder, "stream", None)   # the node's one Rerun stream
         self._unrecorded = []             # states of steps the recorder has not seen yet
         self._books = []                  # error books of some of them (step_batch's `books`)
         self._books_every = getattr(recorder, "books_every", 0)   # 0: none
@@ -49,6 +50,17 @@ class RecorderLink:
         if hasattr(recorder, "for_node"):
             self.call("for_node", stamp_origin_ns)
         self.call("start", sim)
+
+    def reopen(self, config) -> "RecorderLink":
+        """rerun_* changed: this recording finished (its file closed, complete) and the
+        link to the next, on the same Rerun stream: rerun frees no stream before the process
+        exits (rerun#2116), so a new one per change would leak its threads and memory."""
+        stream = self.stream
+        self.finish()
+        link = RecorderLink(self.log, make_recorder(config, self.log, stream), self.sim,
+                            stamp_origin_ns=self.stamp_origin_ns)
+        link.stream = link.stream or stream
+        return link
 
     def start(self, sim) -> None:
         """A new simulator (reset or rebuilt): the old one's steps go first."""

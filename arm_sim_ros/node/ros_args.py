@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+from fractions import Fraction
 
 import yaml
 
@@ -31,13 +32,30 @@ STRTOD_HEX = re.compile(r"[-+]?0[xX](?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]
 LOG_LEVELS = ("debug", "info", "warn", "warning", "error", "fatal")
 
 
+DBL_MIN = 2.2250738585072014e-308     # the smallest normal double
+
+
+def _exact(text: str, value: float) -> bool:
+    """Whether the double `value` is exactly the number `text` writes (decimal or hex)."""
+    exact = _hex_fraction(text) if STRTOD_HEX.fullmatch(text) else Fraction(text)
+    return Fraction(value) == exact
+
+
+def _hex_fraction(text: str) -> Fraction:
+    sign = -1 if text.startswith("-") else 1
+    mantissa, _, exponent = text.lstrip("+-")[2:].lower().partition("p")
+    whole, _, fraction = mantissa.partition(".")
+    digits = int(whole + fraction or "0", 16)
+    return sign * Fraction(digits) * Fraction(2) ** (int(exponent or 0) - 4 * len(fraction))
+
+
 def rcl_scalar(text: str, quoted: bool = False):
     """One scalar as rcl's get_value types it: bool, int, float or str."""
     if quoted:
         return text
     if text in TRUE or text in FALSE:
         return text in TRUE
-    if STRTOL.fullmatch(text):
+    if STRTOL.fullmatch(text) and len(text) <= 25:   # longer overflows int64 (and int())
         value = int(text, 16) if text.lstrip("+-")[:2] in ("0x", "0X") else \
             int(text, 8) if text.lstrip("+-").startswith("0") and len(text.lstrip("+-")) > 1 \
             else int(text)
@@ -51,8 +69,10 @@ def rcl_scalar(text: str, quoted: bool = False):
         value = float.fromhex(text) if STRTOD_HEX.fullmatch(text) else float(text)
         digits = re.sub(r"[eEpP].*", "", text.lstrip("+-"))
         overflow = math.isinf(value) and "inf" not in text.lower()
+        # glibc's strtod sets ERANGE (rcl then reads text) for a result rounded to zero or
+        # to a subnormal; a subnormal it holds exactly (0x1p-1074) is a double
         underflow = (value == 0.0 and any(c not in "0.xX" for c in digits)) or \
-            (value != 0.0 and abs(value) < 2.2250738585072014e-308)
+            (value != 0.0 and abs(value) < DBL_MIN and not _exact(text, value))
         if not (overflow or underflow):
             return value
     return text

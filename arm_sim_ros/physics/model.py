@@ -16,6 +16,31 @@ class ParameterError(ValueError):
     """A physical parameter set that cannot describe a real arm."""
 
 
+def arithmetic_fault(error: ArithmeticError | ValueError) -> str:
+    """What an arithmetic error in a step means for the arm, in its words rather than
+    Python's ("math domain error", "float division by zero", "math range error")."""
+    if isinstance(error, ZeroDivisionError):
+        return "a quantity divided by one that vanished (a singular mass matrix or a zero rate)"
+    if isinstance(error, OverflowError):
+        return "a velocity, torque or energy beyond double precision (1.8e308)"
+    return "an angle or velocity beyond what sin, cos and sqrt can take (the state left the doubles)"
+
+
+BRIEF = 200   # characters of a refused value a message shows
+
+
+def brief(value, limit: int = BRIEF) -> str:
+    """repr(value) for a message: at most `limit` characters and its length, so a 100 KB
+    value makes a short line; an integer too long to print is named by its digits."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 1000:
+        return f"an integer of about {int(value.bit_length() * 0.30103) + 1} digits"
+    try:
+        text = repr(value)
+    except ValueError:                   # a container holding an integer too long to print
+        return f"a {type(value).__name__} holding an integer too long to print"
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} chars)"
+
+
 @dataclass(frozen=True)
 class ArmParameters:
     """Link i: length l_i, mass m_i, centre of mass r_i from its joint, inertia I_i about the COM.

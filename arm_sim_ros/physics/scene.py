@@ -9,15 +9,15 @@ import difflib
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from math import isfinite, pi, radians
+from math import inf, isfinite, pi, radians
 from pathlib import Path
 
 from .. import yaml_files
 from .accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
-                      JointLimits, Motors, validate)
+                      JointLimits, Motors, scene_effects, validate)
 from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
-from .model import PAIR_FIELDS, ArmParameters, ParameterError
+from .model import PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
 MAX_INITIAL_ANGLE = 1e6   # rad
@@ -105,10 +105,31 @@ class Scene:
             self.arm
         except ParameterError as error:
             raise SceneError(str(error)) from None
+        self._check_plan_inputs()
         limits = JointLimits.make(**self.joint_limits) if self.joint_limits else None
         if limits is not None and limits.hard and limits.inside(self.initial_positions):
             raise SceneError(f"initial_positions: {limits.inside(self.initial_positions)} "
                              "(hard joint_limits cannot start beyond)")
+
+    def _check_plan_inputs(self) -> None:
+        """Each effect built, and the stiffness and frequency the step plan derives from it
+        doubles: values whose products overflow (a torque_constant of 1e200, a believed arm
+        of 1e200 m) are refused here, in the physics' words, not later in the planner."""
+        arm = self.arm
+        try:
+            effects = scene_effects(self)
+        except ParameterError as error:
+            raise SceneError(str(error)) from None
+        for effect in effects:
+            try:
+                derived = (effect.stiffness(arm), effect.frequency(arm))
+            except (OverflowError, ZeroDivisionError, ValueError):
+                derived = (inf,)
+            if not all(isfinite(v) for v in derived):
+                raise SceneError(f"{effect.name or type(effect).__name__}: its stiffness "
+                                 "(1/s) and frequency (rad/s), which set the step plan, are "
+                                 "beyond double precision with these values; use values at a "
+                                 "robot's scale")
 
     @property
     def links(self) -> ArmParameters:
@@ -178,6 +199,19 @@ def _text(value) -> str:
     return str(list(value)) if isinstance(value, tuple) else str(value)
 
 
+def _as_text(value) -> str:
+    """Why a number arrived as text: ROS 2 (rcl, C's strtod) reads one a double cannot hold
+    (beyond 1.8e308, or below the smallest normal double and not exact) as text."""
+    try:
+        number = float(value) if isinstance(value, str) and len(value) < 5000 else None
+    except ValueError:
+        return ""
+    if number is None or number != number:
+        return ""
+    return (" (text: ROS 2 reads a number beyond the doubles, or below 2.2e-308 and not "
+            "exactly a double, as text; write 0.0 or a number in range)")
+
+
 def coerce_value(name: str, kind: str, value):
     """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
     "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
@@ -201,20 +235,20 @@ def coerce_value(name: str, kind: str, value):
         return values
     if kind == "str":
         if not isinstance(value, str):
-            raise SceneError(f"{name} must be text, got {value!r}")
+            raise SceneError(f"{name} must be text, got {brief(value)}")
         return value
     if kind == "pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            raise SceneError(f"{name} must be a list of two numbers, got {value!r}")
+            raise SceneError(f"{name} must be a list of two numbers, got {brief(value)}")
         if len(value) != 2:
             raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
         return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{name} must be a number, got {str(value)[:60]!r}")
+        raise SceneError(f"{name} must be a number, got {brief(value, 60)}{_as_text(value)}")
     try:
         value = float(value)
     except OverflowError:
-        raise SceneError(f"{name} = {str(value)[:20]}... is beyond the largest double") from None
+        raise SceneError(f"{name} = {brief(value, 20)} is beyond the largest double") from None
     if not isfinite(value):
         raise SceneError(f"{name} = {value} is not finite")
     return value

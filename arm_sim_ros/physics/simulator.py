@@ -156,9 +156,7 @@ class Simulator:
         self.retired = tuple(r + w - n for r, w, n in zip(self.retired, was, self.books(self.state)))
 
     @property
-    def substeps_taken(self) -> int:
-        """Sub-steps run since reset in split steps (0 while plain steps do): the stability
-        plan's, the tolerance's and the switching stepper's (accuracy.py, events.py)."""
+    def substeps_taken(self) -> int:   # in split steps since reset (accuracy.py, events.py)
         return self.accuracy.taken(self.steps)
 
     @property
@@ -168,8 +166,13 @@ class Simulator:
 
     @property
     def accumulated_error(self) -> float:
-        """Σ error_estimate since reset: bounds the global error while errors do not grow."""
+        """The global error estimate since reset: the largest distance of the motion from
+        its shadow (shadow.py), rad and rad/s; NaN where steps are not estimated."""
         return self.accuracy.accumulated(self.steps)
+
+    @property
+    def confirmed(self) -> bool:      # the state now found sound: earlier ones are final
+        return self.state is self._sound
 
     @property
     def holding(self) -> bool:
@@ -186,7 +189,7 @@ class Simulator:
             y = (books.plain if self.steps < books.due else books.check)(
                 self._rhs, self.state, self.step_size)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
-            self._refuse(f"cannot be taken: {error}")
+            self._refuse(f"cannot be taken: {model.arithmetic_fault(error)}")
         else:
             total = sum(y)
             if total - total == 0.0 or all(isfinite(v) for v in y):  # inf - inf, NaN are NaN

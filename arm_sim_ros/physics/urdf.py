@@ -33,11 +33,13 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from math import asin, degrees, isfinite, sqrt
+from math import asin, degrees
 
 import numpy as np
 
 from .scene import MAX_INITIAL_ANGLE, Scene, SceneError
+from .urdf_elements import (child_link, element_origin, joint_axis, joint_name, link_mass,
+                            read_number)
 
 TOLERANCE = 1e-4
 # A revolute joint's <limit> needs an effort even where the scene limits none: URDF out writes
@@ -46,6 +48,9 @@ TOLERANCE = 1e-4
 NO_EFFORT_LIMIT = 1e9
 MOVING = ("revolute", "continuous")
 XACRO = "{http://www.ros.org/wiki/xacro}"
+# A robot_description is read whole; these bound the work (the tree is walked in linear time)
+MAX_URDF_CHARS = 4_000_000
+MAX_LINKS = 1000
 
 
 @dataclass(frozen=True)
@@ -102,38 +107,38 @@ def read_urdf(text: str) -> UrdfArm:
     """The arm a planar 2R URDF describes; SceneError (one line) saying why it is not one."""
     tree = _Tree(text)
     shoulder, elbow = tree.moving_joints()
-    link1, link2 = _child(shoulder), _child(elbow)
+    link1, link2 = child_link(shoulder), child_link(elbow)
     tree.check_masses(link1, link2)
-    a1 = _axis(shoulder)
+    a1 = joint_axis(shoulder)
     rot, e = tree.relative(link1, link2)            # the elbow's frame in link 1's
-    a2 = rot @ _axis(elbow)
+    a2 = rot @ joint_axis(elbow)
     cosine = float(a1 @ a2)
     if cosine < -(1 - TOLERANCE):
-        raise SceneError(f"URDF: the axes of {_name(shoulder)} and {_name(elbow)} point opposite "
+        raise SceneError(f"URDF: the axes of {joint_name(shoulder)} and {joint_name(elbow)} point opposite "
                          "ways, so a positive elbow angle would turn clockwise; reverse one")
     if cosine < 1 - TOLERANCE:
-        raise SceneError(f"URDF: the axes of {_name(shoulder)} and {_name(elbow)} are "
+        raise SceneError(f"URDF: the axes of {joint_name(shoulder)} and {joint_name(elbow)} are "
                          f"{degrees(np.arccos(min(1.0, cosine))):.3g}° apart: not parallel, so "
                          "the arm would leave its plane")
     out = float(e @ a1)
     in_plane = e - out * a1
     l1 = float(np.linalg.norm(in_plane))
     if not l1 > 0:
-        raise SceneError(f"URDF: {_name(elbow)} sits on the axis of {_name(shoulder)}: "
+        raise SceneError(f"URDF: {joint_name(elbow)} sits on the axis of {joint_name(shoulder)}: "
                          "link 1 has no length")
     if abs(out) > TOLERANCE * l1:
-        raise SceneError(f"URDF: {_name(elbow)} is {abs(out):.3g} m out of the plane of "
-                         f"{_name(shoulder)}: link offsets must lie in the arm's plane")
+        raise SceneError(f"URDF: {joint_name(elbow)} is {abs(out):.3g} m out of the plane of "
+                         f"{joint_name(shoulder)}: link offsets must lie in the arm's plane")
     d1 = in_plane / l1
     _check_upright(tree.world(link1)[0], a1, d1, shoulder)
     d2 = rot.T @ d1                                 # link 2's line at zero angles, its frame
     tip = tree.tip_length(link2, d2)
     m1, r1, i1 = _body(tree.links[link1], a1, d1, l1)
-    m2, r2, i2 = _body(tree.links[link2], _axis(elbow), d2, tip or 1.0)
+    m2, r2, i2 = _body(tree.links[link2], joint_axis(elbow), d2, tip or 1.0)
     ranges, efforts = zip(*(_limits(j) for j in (shoulder, elbow)))
     unlimited = [e is None or e >= NO_EFFORT_LIMIT for e in efforts]
     damping, friction = zip(*(_dynamics(j) for j in (shoulder, elbow)))
-    return UrdfArm(robot=tree.robot, joint_names=(_name(shoulder), _name(elbow)),
+    return UrdfArm(robot=tree.robot, joint_names=(joint_name(shoulder), joint_name(elbow)),
                    link_lengths=(l1, tip), link_masses=(m1, m2), com_distances=(r1, r2),
                    com_inertias=(i1, i2), ranges=ranges,
                    effort_limits=None if all(unlimited) else tuple(
@@ -146,15 +151,15 @@ def _check_upright(rotation, axis, direction, shoulder) -> None:
     with the world's z up (see the module's docstring)."""
     a, d = rotation @ axis, rotation @ direction
     if abs(a[2]) > 1 - TOLERANCE:
-        raise SceneError(f"URDF: the axis of {_name(shoulder)} is vertical, so the arm would "
+        raise SceneError(f"URDF: the axis of {joint_name(shoulder)} is vertical, so the arm would "
                          "move in a horizontal plane; the physics' plane is vertical (the "
                          "URDF's z is up, gravity along -z): turn the axes horizontal")
     if abs(a[2]) > TOLERANCE:
-        raise SceneError(f"URDF: the axis of {_name(shoulder)} is {degrees(asin(a[2])):.3g}° "
+        raise SceneError(f"URDF: the axis of {joint_name(shoulder)} is {degrees(asin(a[2])):.3g}° "
                          "off the horizontal: the arm's plane must be vertical (z up)")
     up = float(np.cross(a, d)[2])
     if up < -(1 - TOLERANCE):
-        raise SceneError(f"URDF: a positive {_name(shoulder)} angle turns link 1 downward "
+        raise SceneError(f"URDF: a positive {joint_name(shoulder)} angle turns link 1 downward "
                          "(clockwise, where the physics turns counter-clockwise): reverse "
                          "both joint axes")
     if up < 1 - TOLERANCE:
@@ -167,10 +172,10 @@ def _body(link, axis, direction, length):
     """(mass, centre of mass along the link's line, inertia about `axis` at the COM)."""
     name = link.get("name")
     inertial = link.find("inertial")
-    mass = _mass(link)
+    mass = link_mass(link)
     if inertial is None or mass is None:
         raise SceneError(f"URDF: link {name} has no <inertial> mass; the physics needs it")
-    rotation, com = _origin(inertial, f"link {name} <inertial>")
+    rotation, com = element_origin(inertial, f"link {name} <inertial>")
     along = float(com @ direction)
     off = float(np.linalg.norm(com - along * direction))
     if off > TOLERANCE * max(length, abs(along)):
@@ -179,7 +184,7 @@ def _body(link, axis, direction, length):
     element = inertial.find("inertia")
     if element is None:
         raise SceneError(f"URDF: link {name} has no <inertia>")
-    k = {key: _number(element, key, f"link {name} <inertia>")
+    k = {key: read_number(element, key, f"link {name} <inertia>")
          for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
     tensor = np.array([[k["ixx"], k["ixy"], k["ixz"]], [k["ixy"], k["iyy"], k["iyz"]],
                        [k["ixz"], k["iyz"], k["izz"]]])
@@ -188,20 +193,20 @@ def _body(link, axis, direction, length):
 
 def _limits(joint):
     """((lower, upper) or None for continuous, effort or None) of a moving joint."""
-    limit, where = joint.find("limit"), f"joint {_name(joint)} <limit>"
+    limit, where = joint.find("limit"), f"joint {joint_name(joint)} <limit>"
     if limit is None:
         if joint.get("type") == "revolute":
-            raise SceneError(f"URDF: revolute joint {_name(joint)} has no <limit> (URDF needs "
+            raise SceneError(f"URDF: revolute joint {joint_name(joint)} has no <limit> (URDF needs "
                              "its lower, upper, effort and velocity)")
         return None, None
     for key in ("effort", "velocity"):      # urdfdom refuses a limit without either
         if limit.get(key) is None:
             raise SceneError(f"URDF: {where} has no {key} (URDF requires it)")
-    effort = _number(limit, "effort", where)
-    _number(limit, "velocity", where)       # checked, not simulated: no speed limit effect
+    effort = read_number(limit, "effort", where)
+    read_number(limit, "velocity", where)       # checked, not simulated: no speed limit effect
     if joint.get("type") == "continuous":
         return None, effort
-    return (_number(limit, "lower", where, 0.0), _number(limit, "upper", where, 0.0)), effort
+    return (read_number(limit, "lower", where, 0.0), read_number(limit, "upper", where, 0.0)), effort
 
 
 def _dynamics(joint):
@@ -209,8 +214,8 @@ def _dynamics(joint):
     dynamics = joint.find("dynamics")
     if dynamics is None:
         return 0.0, 0.0
-    where = f"joint {_name(joint)} <dynamics>"
-    return _number(dynamics, "damping", where, 0.0), _number(dynamics, "friction", where, 0.0)
+    where = f"joint {joint_name(joint)} <dynamics>"
+    return read_number(dynamics, "damping", where, 0.0), read_number(dynamics, "friction", where, 0.0)
 
 
 class _Tree:
@@ -219,6 +224,9 @@ class _Tree:
     def __init__(self, text: str):
         if not isinstance(text, str) or not text.strip():
             raise SceneError("URDF: empty robot description")
+        if len(text) > MAX_URDF_CHARS:
+            raise SceneError(f"URDF: {len(text)} characters; a planar 2R arm's description "
+                             f"fits in {MAX_URDF_CHARS} (meshes are referenced, not inlined)")
         try:
             root = ET.fromstring(text)
         except ET.ParseError as error:
@@ -235,13 +243,16 @@ class _Tree:
             if not name or name in self.links:
                 raise SceneError(f"URDF: a <link> is {'unnamed' if not name else 'named twice: ' + name}")
             self.links[name] = link
+        if len(self.links) > MAX_LINKS:
+            raise SceneError(f"URDF: {len(self.links)} links; a planar 2R arm has two moving "
+                             f"ones and at most {MAX_LINKS} in all")
         self.parent_joint = {}                       # child link -> its joint
         for joint in root.findall("joint"):
             parent, child = (joint.find(k).get("link") if joint.find(k) is not None else None
                              for k in ("parent", "child"))
             for end in (parent, child):
                 if end not in self.links:
-                    raise SceneError(f"URDF: joint {_name(joint)} names link {end!r}, which "
+                    raise SceneError(f"URDF: joint {joint_name(joint)} names link {end!r}, which "
                                      "the URDF does not have")
             if child in self.parent_joint:
                 raise SceneError(f"URDF: link {child} is the child of two joints")
@@ -251,8 +262,22 @@ class _Tree:
             raise SceneError(f"URDF: {len(roots)} root links ({', '.join(roots) or 'a loop'}); "
                              "a robot is one tree")
         self.root = roots[0]
-        for link in self.links:
-            self.chain(link)                          # refuses a loop
+        self.children = {}                           # parent link -> its joints
+        for joint in self.parent_joint.values():
+            self.children.setdefault(joint.find("parent").get("link"), []).append(joint)
+        self.order = self.below(self.root)            # every link once, parents first
+        if len(self.order) != len(self.links):        # what the root does not reach is a loop
+            stray = next(name for name in self.links if name not in set(self.order))
+            raise SceneError(f"URDF: the joints around link {stray} form a loop")
+
+    def below(self, top) -> list:
+        """`top` and every link below it, each after its parent: one pass, linear in links."""
+        order, stack = [], [top]
+        while stack:
+            link = stack.pop()
+            order.append(link)
+            stack += [child_link(joint) for joint in self.children.get(link, ())]
+        return order
 
     def chain(self, link) -> list:
         """The joints from the root to `link`, root first."""
@@ -274,26 +299,30 @@ class _Tree:
             if kind in MOVING:
                 moving.append(joint)
             elif kind != "fixed":
-                raise SceneError(f"URDF: joint {_name(joint)} is {kind}: a planar 2R arm has "
+                raise SceneError(f"URDF: joint {joint_name(joint)} is {kind}: a planar 2R arm has "
                                  "two revolute or continuous joints, and fixed ones")
         if len(moving) != 2:
             raise SceneError(f"URDF: {len(moving)} revolute or continuous joints "
-                             f"({', '.join(map(_name, moving)) or 'none'}); a 2R arm has two")
+                             f"({', '.join(map(joint_name, moving)) or 'none'}); a 2R arm has two")
         for shoulder, elbow in (moving, moving[::-1]):
-            if any(j is shoulder for j in self.chain(_child(elbow))):
+            if any(j is shoulder for j in self.chain(child_link(elbow))):
                 return shoulder, elbow
-        raise SceneError(f"URDF: {_name(moving[0])} and {_name(moving[1])} are on separate "
+        raise SceneError(f"URDF: {joint_name(moving[0])} and {joint_name(moving[1])} are on separate "
                          "branches, not one chain")
 
     def check_masses(self, link1, link2) -> None:
         """Only the two links move with mass: a massive link fixed to one is refused."""
+        carried = {self.root: None}    # link -> the moving link it is fixed to (None: base)
+        for name in self.order[1:]:
+            joint = self.parent_joint[name]
+            carried[name] = (name if joint.get("type") in MOVING
+                             else carried[joint.find("parent").get("link")])
         for name, link in self.links.items():
-            if name in (link1, link2) or not _mass(link):
+            if name in (link1, link2) or not link_mass(link):
                 continue
-            moving = [j for j in self.chain(name) if j.get("type") in MOVING]
-            if moving:
-                body = _child(moving[-1])
-                raise SceneError(f"URDF: link {name} ({_mass(link):g} kg) is fixed to {body}: "
+            if carried[name] is not None:
+                body = carried[name]
+                raise SceneError(f"URDF: link {name} ({link_mass(link):g} kg) is fixed to {body}: "
                                  f"fold it into {body}'s <inertial> (the physics has two "
                                  "rigid links)")
 
@@ -301,7 +330,7 @@ class _Tree:
         """(rotation, translation) of `link`'s frame in `ancestor`'s, at zero angles."""
         rotation, translation = np.eye(3), np.zeros(3)
         for joint in self.chain(link)[len(self.chain(ancestor)):]:
-            r, t = _origin(joint, f"joint {_name(joint)}")
+            r, t = element_origin(joint, f"joint {joint_name(joint)}")
             rotation, translation = rotation @ r, translation + rotation @ t
         return rotation, translation
 
@@ -310,81 +339,14 @@ class _Tree:
 
     def tip_length(self, link2, direction):
         """How far the farthest frame fixed to link 2 on its line is from the elbow."""
-        best = None
-        for name in self.links:
-            chain = self.chain(name)
-            if name == link2 or not any(_child(j) == link2 for j in chain):
-                continue
-            t = self.relative(link2, name)[1]
+        best, frames = None, {link2: (np.eye(3), np.zeros(3))}
+        for name in self.below(link2)[1:]:           # link 2's frame carried down, once each
+            joint = self.parent_joint[name]
+            rotation, translation = frames[joint.find("parent").get("link")]
+            r, t = element_origin(joint, f"joint {joint_name(joint)}")
+            frames[name] = (rotation @ r, translation + rotation @ t)
+            t = frames[name][1]
             along = float(t @ direction)
             if along > 0 and np.linalg.norm(t - along * direction) <= TOLERANCE * along:
                 best = along if best is None else max(best, along)
         return best
-
-
-def _name(joint) -> str:
-    return joint.get("name") or "(unnamed joint)"
-
-
-def _child(joint) -> str:
-    return joint.find("child").get("link")
-
-
-def _mass(link):
-    element = link.find("inertial/mass")
-    return None if element is None else _number(element, "value", f"link {link.get('name')} <mass>")
-
-
-def _number(element, key, where, default=None) -> float:
-    text = element.get(key)
-    if text is None:
-        if default is None:
-            raise SceneError(f"URDF: {where} has no {key}")
-        return default
-    try:
-        value = float(text)
-    except ValueError:
-        raise SceneError(f"URDF: {where} {key}={text!r} is not a number") from None
-    if not isfinite(value):
-        raise SceneError(f"URDF: {where} {key}={text!r} is not finite")
-    return value
-
-
-def _vector(element, key, where, default) -> np.ndarray:
-    text = element.get(key) if element is not None else None
-    if text is None:
-        return np.array(default, dtype=float)
-    try:
-        values = [float(v) for v in text.split()]
-    except ValueError:
-        values = []
-    if len(values) != 3 or not all(isfinite(v) for v in values):
-        raise SceneError(f"URDF: {where} {key}={text!r} is not three finite numbers")
-    return np.array(values)
-
-
-def _origin(element, where):
-    """(rotation, translation) of an element's <origin>: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    origin = element.find("origin")
-    xyz = _vector(origin, "xyz", where + " <origin>", (0.0, 0.0, 0.0))
-    roll, pitch, yaw = _vector(origin, "rpy", where + " <origin>", (0.0, 0.0, 0.0))
-    return _rotation(roll, pitch, yaw), xyz
-
-
-def _rotation(roll, pitch, yaw) -> np.ndarray:
-    if not (roll or pitch or yaw):
-        return np.eye(3)                   # exact: generated URDFs read back bit for bit
-    cr, sr, cp, sp, cy, sy = (np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch),
-                              np.cos(yaw), np.sin(yaw))
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def _axis(joint) -> np.ndarray:
-    """The joint's unit axis in its child's frame (URDF's default: x)."""
-    axis = _vector(joint.find("axis"), "xyz", f"joint {_name(joint)} <axis>", (1.0, 0.0, 0.0))
-    norm = sqrt(float(axis @ axis))
-    if not norm > 0:
-        raise SceneError(f"URDF: joint {_name(joint)} has a zero <axis>")
-    return axis / norm

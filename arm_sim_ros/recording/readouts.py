@@ -128,6 +128,24 @@ class Snapshot:
         return np.column_stack(np.broadcast_arrays(t1, t2, states[:, 0])[:2])
 
 
+def reads_alike(old: Snapshot, new: Snapshot) -> bool:
+    """Whether rows read the same under `new` as under `old` (a live change of damping or
+    friction values: the energies, books and joint torque a row shows do not depend on
+    them), so that rows before and after the change can go in one batch."""
+    if old.key != new.key or old.retired != new.retired or old.drives != new.drives:
+        return False
+    if not old.drives:
+        return True
+    a, b = old._torque, new._torque          # the drive chain's code and its constants
+    if a.__code__.co_code != b.__code__.co_code or a.__code__.co_consts != b.__code__.co_consts:
+        return False
+    try:
+        return all(bool(np.all(a.__globals__.get(n) == b.__globals__.get(n)))
+                   for n in a.__code__.co_names if n != "command")
+    except (TypeError, ValueError):
+        return False
+
+
 def vectorised(function):
     """A generated function of physics/dynamics.py run on arrays: the same code with
     numpy's cos, sin, minimum and maximum, as physics/batch.py runs the right-hand side."""

@@ -6,12 +6,20 @@ from __future__ import annotations
 
 import os
 import socket
+import stat
+import struct
 import sys
 from urllib.parse import urlsplit
 
 import rerun as rr
+from rerun import bindings
+
+from ..usage import UsageError
+from .csv_file import let_writes_fail_on_file_size_limit
 
 DEFAULT_PORT = 9876
+RRD_HEADER = 12       # an .rrd: 'RRF2', version, options; then messages {kind, length}
+RRD_END = 0           # the kind of the end-of-stream marker (the footer follows)
 
 
 def viewer_url(address: str) -> str:
@@ -42,6 +50,7 @@ def open_sinks(stream, board, opened: list, warn_once, path=None, spawn=False,
     is warn_once(key, message), key "file", "spawn" or "connect", and that sink is skipped."""
     sinks = []
     if path:
+        let_writes_fail_on_file_size_limit()   # a full file then fails a write: checked at the end
         try:
             open(path, "wb").close()
             sinks.append(rr.FileSink(str(path)))
@@ -60,8 +69,37 @@ def open_sinks(stream, board, opened: list, warn_once, path=None, spawn=False,
             warn_once("connect", f"rerun: no viewer answers at {url}; running on "
                                  "without it (start `rerun` first)")
     if sinks:
-        rr.set_sinks(*sinks, default_blueprint=board, recording=stream)
+        bindings.set_sinks(sinks, default_blueprint=blueprint_storage(stream, board),
+                           recording=stream.to_native())
     return bool(sinks)
+
+
+# rerun 0.41 builds every blueprint it sends (rr.set_sinks, rr.send_blueprint) on a new
+# native stream that it frees only at exit (rerun#2116): two threads and their buffers per
+# blueprint. A node that changes its layout or its file 100 times a second would grow by
+# hundreds of threads, so each application's blueprints go through one stream, reused.
+_BLUEPRINT_STREAMS: dict = {}
+
+
+def blueprint_storage(stream, board):
+    """`board` as the storage rerun's bindings send, built on the application's one
+    blueprint stream (as rerun.blueprint.api.create_in_memory_blueprint builds it)."""
+    application_id = stream.get_application_id()
+    blueprint_stream = _BLUEPRINT_STREAMS.get(application_id)
+    if blueprint_stream is None:
+        blueprint_stream = _BLUEPRINT_STREAMS[application_id] = rr.RecordingStream._from_native(
+            bindings.new_blueprint(application_id=application_id, make_default=False,
+                                   make_thread_default=False, default_enabled=True))
+    memory = blueprint_stream.memory_recording()   # the sink this blueprint alone goes to
+    blueprint_stream.set_time("blueprint", sequence=0)
+    board.to_blueprint()._log_to_stream(blueprint_stream)
+    return memory.storage
+
+
+def send_blueprint(stream, board) -> None:
+    """rr.send_blueprint(board, recording=stream) without a new stream per call."""
+    bindings.send_blueprint(blueprint_storage(stream, board), True, True,
+                            recording=stream.to_native())
 
 
 def _spawn_viewer(stream, sinks, opened, warn_once) -> None:
@@ -82,3 +120,30 @@ def _spawn_viewer(stream, sinks, opened, warn_once) -> None:
         return
     sinks.append(rr.GrpcSink(url))
     opened.append("spawned viewer")
+
+
+def check_rrd_file(path) -> None:
+    """After the stream is disconnected: `path` must end in rerun's end marker. rerun only
+    logs a write the disk refuses, so a full disk would leave a file cut mid-message that no
+    reader opens; it is cut back to its last whole message (a readable recording, without
+    the footer) and UsageError says so."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return                               # a device or pipe: nothing to check
+        with open(path, "rb") as file:
+            data = file.read()
+    except OSError:
+        return
+    position, messages = RRD_HEADER, 0
+    while position + 16 <= len(data):
+        kind, length = struct.unpack_from("<QQ", data, position)
+        if position + 16 + length > len(data):
+            break                                # cut in the middle of this message
+        if kind == RRD_END:
+            return                               # complete
+        position, messages = position + 16 + length, messages + 1
+    with open(path, "r+b") as file:
+        file.truncate(position if messages else 0)
+    raise UsageError(f"cannot write --rerun {path}: the disk refused part of it (full, or a "
+                     f"file-size limit); the file is cut back to the {messages} whole messages "
+                     "that fit and reads as a recording")

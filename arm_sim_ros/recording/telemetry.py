@@ -40,10 +40,10 @@ import numpy as np
 import rerun as rr
 
 from .arm3d import arm3d_for
-from .blueprint import blueprint, styles
+from .blueprint import blueprint, effects_document, styles
 from .properties import send_properties
-from .readouts import Snapshot, error_books, held_by
-from .sinks import open_sinks
+from .readouts import Snapshot, error_books, held_by, reads_alike
+from .sinks import check_rrd_file, open_sinks, send_blueprint
 from .writer import BatchWriter
 
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
@@ -66,13 +66,15 @@ class RerunRecorder:
     timeline from where the last run ended, as the node's JointState stamps do."""
 
     def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
-                 warn=None):
+                 warn=None, stream=None):
+        """`stream`: a RecordingStream to record on (a node's, finished and reused for its
+        next recording: rerun frees no stream before the process exits, rerun#2116)."""
         self.scene = scene
         self.path, self.spawn, self.connect = path, spawn, connect
         self.live = bool(spawn or connect)
         self._warn = warn or logging.getLogger(__name__).warning
         self._warned = set()
-        self.stream = rr.RecordingStream(application_id)
+        self.stream = stream if stream is not None else rr.RecordingStream(application_id)
         self.sinks = []           # descriptions of the sinks that opened
         self.enabled = False
         self.sim = None
@@ -87,7 +89,7 @@ class RerunRecorder:
         self._walls, self._ticks = [], []
         self.node = False         # a node's recording: its story per tick, ros_time its stamps
         self.stamp_origin_ns = 0  # ros_time at sim_time 0 (arm-sim run: stamps are sim time)
-        self._described = None    # (scene, layout) the properties were sent for
+        self._static = StaticData()
         self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
         self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
@@ -118,23 +120,24 @@ class RerunRecorder:
         """After a physics step: keep its state and its error books (see step_batch)."""
         self.step_batch(sim, (sim.state,))
 
-    def step_batch(self, sim, states, books=()) -> None:
-        """After len(states) physics steps: their states in order, the last being sim.state,
-        taken under the command sim holds now (the node hands its steps over before a new
-        command). The node calls this every 10 steps, `arm-sim run` every 1000; the states
-        are copied, so the caller may reuse the list; `books`: the error books of every
-        books_every-th step among them (module docstring). Nothing else happens (see flush)."""
+    def step_batch(self, sim, states, books=(), last=None) -> None:
+        """After len(states) physics steps: their states in order, the last being sim.state
+        (or step `last`'s: rows before a retracted stretch), taken under the command sim
+        holds now (the node hands its steps over before a new command). The node calls this
+        every 10 steps, `arm-sim run` every 1000; the states are copied, so the caller may
+        reuse the list; `books`: the error books of every books_every-th step among them
+        (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
             self._bind(sim)
-        n = len(states)
+        n, end = len(states), sim.steps if last is None else last   # last: a retraction after
         if n == 0:
             return
         snap = self._snapshot     # None: it could not be made, and telemetry is off
-        extend_runs(self._runs, sim.steps - n + 1,
+        extend_runs(self._runs, end - n + 1,
                     tuple(sim.dynamics.command) if snap and snap.commanded else None, n)
-        self._next = sim.steps + 1
+        self._next = end + 1
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
-        self._books.fromlist(with_last(books, sim))
+        self._books.fromlist(with_last(books, sim) if last is None else list(books))
         self._waiting += n
         if self._waiting >= self._check_at:
             self.flush()
@@ -184,20 +187,23 @@ class RerunRecorder:
         self._sender.close()
         if self.sim is not None and self._on_sim_event in self.sim.event_listeners:
             self.sim.event_listeners.remove(self._on_sim_event)
-        if self.enabled:
+        if self.sinks:                        # closed even after a failure: a whole file
             self._guard(self.stream.flush, timeout_sec=FLUSH_TIMEOUT)
             self._guard(self.stream.disconnect)
         self.enabled = False
+        if self.path and self.sinks:
+            check_rrd_file(self.path)         # a full disk: cut to whole messages, one line
 
     # -- binding a simulator --------------------------------------------------------------
 
     def _bind(self, sim) -> bool:
-        """Rows buffered so far belong to the previous simulator (or to sim's dynamics
-        before a live change): send them first. Returns whether sim carries on the run
-        (the same simulator, not reset), which keeps the run's E(0). The simulator's own
-        events (sub-stepping, refused steps) go to the text log."""
+        """Rows buffered so far belong to the previous simulator or dynamics: sent first,
+        unless they read alike. Returns whether sim carries on the run (the same simulator,
+        not reset: the run's E(0) kept). Its own events go to the text log."""
         previous = self.sim
         carried = sim is previous and sim.steps + 1 >= self._next
+        if carried and _alike_carried_on(self, sim):
+            return True
         if previous is not None:
             self.flush(force=True)
         initial = self._snapshot.initial if carried and self._snapshot is not None else None
@@ -224,17 +230,11 @@ class RerunRecorder:
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
         elif layout != self._layout and self.enabled:
-            rr.send_blueprint(blueprint(snap, self.live, self.node), recording=self.stream)
+            send_blueprint(self.stream, blueprint(snap, self.live, self.node))
         self._layout = layout
         if not self.enabled:
             return
-        for path, archetypes in styles(snap, self.node):
-            self.stream.log(path, *archetypes, static=True)
-        if self._described != (sim.scene, snap.key):   # the scene as data (a reset keeps it)
-            self._described = (sim.scene, snap.key)
-            send_properties(self.stream, snap, sim, self.stamp_origin_ns, self.node)
-            if snap.arm3d is not None:
-                snap.arm3d.log_static(self.stream, snap.arm, sim.scene.gravity, snap.drives)
+        self._static.send(self.stream, snap, sim, self.node, self.stamp_origin_ns)
 
     # -- sending ------------------------------------------------------------------------
 
@@ -259,6 +259,48 @@ class RerunRecorder:
         if key not in self._warned:
             self._warned.add(key)
             self._warn(message)
+
+
+def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
+    """A live change its rows do not show (readouts.reads_alike: damping, friction values):
+    the batch being filled goes on under the new snapshot, with no send of its own (a
+    slider at 100 changes/s would otherwise send ~20 small chunks per change, and rerun
+    keeps an index entry per chunk until the file closes). The static data follows."""
+    if recorder._snapshot is None:
+        return False
+    snap = Snapshot(sim, recorder._snapshot.initial)
+    if not reads_alike(recorder._snapshot, snap):
+        return False
+    snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
+    if recorder.enabled:
+        recorder._guard(recorder._static.send, recorder.stream, snap, sim, recorder.node,
+                        recorder.stamp_origin_ns)
+    return True
+
+
+class StaticData:
+    """What a recording logs static (series styles, the scene as data, the 3D arm), logged
+    again only where it changed: a live change (100/s from a slider or a fuzzer) must not
+    grow the file and rerun's memory by a mesh each time."""
+
+    def __init__(self):
+        self._sent = {}           # kind -> what it was last logged from
+
+    def send(self, stream, snap, sim, node: bool, stamp_origin_ns) -> None:
+        if self._changed("styles", (snap.key, effects_document(snap))):
+            for path, archetypes in styles(snap, node):
+                stream.log(path, *archetypes, static=True)
+        if self._changed("properties", (sim.scene, snap.key)):   # a reset keeps them
+            send_properties(stream, snap, sim, stamp_origin_ns, node)
+        if snap.arm3d is not None and self._changed(
+                "arm3d", (snap.arm3d, snap.arm, sim.scene.gravity, snap.drives)):
+            snap.arm3d.log_static(stream, snap.arm, sim.scene.gravity, snap.drives)
+
+    def _changed(self, kind: str, source) -> bool:
+        if self._sent.get(kind) == source:
+            return False
+        self._sent[kind] = source
+        return True
 
 
 class SenderThread:
@@ -318,7 +360,7 @@ def start_line(sim) -> str:
 
 
 def make_recorder(scene=None, path=None, spawn=False, connect=None, application_id="arm_sim",
-                  warn=None) -> RerunRecorder | None:
+                  warn=None, stream=None) -> RerunRecorder | None:
     """A recorder writing to `path` (.rrd), a spawned viewer and/or a running viewer at
     `connect`; None when no sink is asked for. The recording is named after `scene`
     (default: the first simulator's); `warn` receives the one-line warnings (default:
@@ -326,4 +368,4 @@ def make_recorder(scene=None, path=None, spawn=False, connect=None, application_
     if not (path or spawn or connect):
         return None
     return RerunRecorder(scene, path=path, spawn=spawn, connect=connect,
-                         application_id=application_id, warn=warn)
+                         application_id=application_id, warn=warn, stream=stream)

@@ -78,8 +78,8 @@ class BatchWriter:
 
     def _index(self, rows, n):
         """The time columns of rows of this batch (clipped to its last; none: the last sent)."""
-        if not n:
-            return self._columns([self._last_ns], [self._last_wall or 0])
+        if not n:            # a batch of lines only: each at the last row sent
+            return self._columns([self._last_ns] * len(rows), [self._last_wall or 0] * len(rows))
         at = np.minimum(rows, n - 1)
         return self._columns(self._row_ns[at], self._row_wall[at])
 

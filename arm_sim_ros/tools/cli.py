@@ -16,9 +16,10 @@ from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..recording.csv_file import CsvRecorder
 from ..recording.readouts import error_books, held_by
-from ..outputs import check_output, clear_output, strict_json
+from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
+from .confirmed import ConfirmedSteps
 from .progress import Progress
 from .signals import StopOnSignals
 
@@ -58,32 +59,23 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
     (its .requested set by a signal): every recorder has then seen the same last step.
-    Returns the largest |residual| seen."""
+    A step reaches the recorders only once the divergence check has confirmed it; steps it
+    retracts never do (tools/confirmed.py). Returns the largest |residual| seen."""
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    states, books = [], []
-    keep, book = states.append, books.extend
-    every = min((r.books_every for r in batched), default=0)
-
-    def on_step(s):
-        if batched:               # only a recorder with step_batch needs them collected
-            keep(s.state)
-            if s.steps % every == 0:
-                book(error_books(s))
-        for step in each:
-            step(s)
+    # rows are held until the divergence check confirms them (tools/confirmed.py)
+    steps = ConfirmedSteps(sim, each, bool(batched),
+                           min((r.books_every for r in batched), default=0))
 
     largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
     end = sim.time + duration
     while left > 0 and not (stop is not None and stop.requested):
-        steps = min(left, chunk)
+        count = min(left, chunk)
         started = time.perf_counter()
-        largest = max(largest, sim.run(steps * sim.step_size, on_step if recorders else None))
-        for recorder in batched:
-            recorder.step_batch(sim, states, books)
-        states.clear()
-        books.clear()
-        left -= steps
+        largest = max(largest, sim.run(count * sim.step_size,
+                                       steps.on_step if recorders else None))
+        steps.hand_over(batched)
+        left -= count
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
             chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)
         if progress is not None:
@@ -91,19 +83,25 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     return largest
 
 
-def check_run_outputs(args) -> None:
-    """Every output of `run` checked by one rule before any work (outputs.check_output)."""
+def check_run_outputs(args) -> list:
+    """Every output of `run` checked by one rule before any work (outputs.check_output), and
+    the files claimed (outputs.claim_output); returns the paths claimed."""
     if args.publish_rate is not None and not args.bag:
         raise UsageError("--publish-rate sets the JointState rate of a --bag recording; "
                          "add --bag DIR, or leave it out")
     wanted = [(args.csv, "--csv", False, ()), (args.rerun, "--rerun", False, (".rrd",)),
               (args.bag, "--bag", True, ())]
-    paths = [check_output(path, option, args.force, directory, suffixes)
+    paths = [(check_output(path, option, args.force, directory, suffixes), option, directory)
              for path, option, directory, suffixes in wanted if path is not None]
-    for path in paths:
-        clear_output(path)
+    claimed = []
+    for path, option, directory in paths:
+        if args.force:        # only then: what it removes is what --force replaces
+            clear_output(path)
+        if not directory:     # the bag's directory is claimed by its mkdir
+            claimed += [path] if claim_output(path, option) else []
     if args.publish_rate is None:
         args.publish_rate = 100.0    # the default, applied here so that giving it is detectable
+    return claimed
 
 
 def cmd_run(args) -> int:
@@ -113,9 +111,14 @@ def cmd_run(args) -> int:
     duration = scene.duration if args.duration is None else parse_value("duration", args.duration)
     scene = scene.replace(duration=duration)
     scene.steps_for(duration)  # refuse before any file is opened
-    check_run_outputs(args)
     sim = Simulator(scene)
-    recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
+    claimed = check_run_outputs(args)
+    try:
+        recorders = [r for r in (make(args) for make in RUN_RECORDERS) if r is not None]
+    except BaseException:      # refused before the run: the files claimed go again
+        for path in claimed:
+            path.unlink(missing_ok=True)
+        raise
     with StopOnSignals() as stop, Progress(duration, f"arm-sim run {scene.name}") as progress:
         for recorder in recorders:
             recorder.start(sim)

@@ -29,6 +29,7 @@ from .dds_graph import NameWatch
 from .dds_services import DdsServices
 
 LOCKSTEP_WAIT = 0.01   # wall seconds a lockstep node waits for a command before serving again
+SERVE_SLICE = 0.1      # wall seconds the loop sleeps at most before it looks again
 
 
 def _stamp(stamp_ns: int) -> msg.Time:
@@ -181,10 +182,15 @@ class DdsArmSimNode:
                 self.services.poll()                   # commands tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
                     self._publish_clock()              # the time, while nobody commands
+            elif schedule.wait(now) > 0:
+                # sleep, serving, in slices: a signal is handled and a new period (a
+                # parameter set) is taken up within SERVE_SLICE
+                period = self.core.config.wall_period
+                self.services.serve_for(min(schedule.wait(now), SERVE_SLICE))
+                now = self.wall_clock()
+                if self.core.config.wall_period < period:
+                    schedule.next_tick = min(schedule.next_tick, now + self.core.config.wall_period)
             else:
-                if schedule.wait(now) > 0:
-                    self.services.serve_for(schedule.wait(now))   # sleep, serving
-                    now = self.wall_clock()
                 self.tick(now)
                 # the period now: a parameter set may have changed it
                 schedule.ticked(now, self.core.config.wall_period)

@@ -39,7 +39,7 @@ from .dds_simulation import ROS_TYPE_NAMES, TYPE_HASHES, DdsSimulation
 
 REPLY_WAIT = 2.0          # s a reply waits for its client's reply reader to be matched
 PARAMETERS_DEPTH = 1000   # rmw_qos_profile_parameters / rmw_qos_profile_parameter_events
-SERVICES_DEPTH = 10       # rmw_qos_profile_services_default
+WAIT_SLICE = 0.1          # s a wait blocks at most (Python handles signals between waits)
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
@@ -176,7 +176,9 @@ class DdsServices:
         self.endpoints = [
             ServiceEndpoint(participant, check_topic_name(resolve(service), "service name"),
                             request, reply, handler,
-                            PARAMETERS_DEPTH if "parameter" in service else SERVICES_DEPTH,
+                            # every service keeps as many as the parameter services, so
+                            # that a burst of 200/s (~/reset) loses none between two polls
+                            PARAMETERS_DEPTH,
                             cs_id(guid, index + 1))
             for index, (service, request, reply, handler) in enumerate(services)]
         self.waitset = WaitSet(participant)
@@ -228,7 +230,7 @@ class DdsServices:
         """Wait `seconds` (wall time), answering requests as they arrive."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
-            wait = min(left, 0.005) if self.pending else left
+            wait = min(left, 0.005 if self.pending else WAIT_SLICE)   # signals between waits
             self.waitset.wait(duration(seconds=wait))
             self.poll()
 

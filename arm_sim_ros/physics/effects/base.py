@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import isfinite
 
-from ..model import ParameterError
+from ..model import ParameterError, brief
 
 REQUIRED = object()
 CHECKS = {  # check name: (test, what the value must be)
@@ -42,7 +42,7 @@ class Parameter:
         if self.kind == "pair":
             if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
                 raise ParameterError(f"{label} must be a list of two numbers ({self.unit}), "
-                                     f"got {value!r}")
+                                     f"got {brief(value)}")
             if len(value) != 2:
                 raise ParameterError(f"{label} needs two numbers, one per joint ({self.unit}), "
                                      f"got {len(value)}")
@@ -61,7 +61,7 @@ class Parameter:
 
     def _number(self, label: str, value) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"{label} must be a number ({self.unit}), got {value!r}")
+            raise ParameterError(f"{label} must be a number ({self.unit}), got {brief(value)}")
         try:
             value = float(value)
         except OverflowError:
@@ -77,7 +77,7 @@ def validate(effect: str, parameters, mapping) -> dict:
     """An effect's scene mapping checked against its parameters; defaults filled in."""
     if not isinstance(mapping, dict):
         raise ParameterError(f"{effect} must be a mapping of "
-                             f"{', '.join(p.name for p in parameters)}, got {mapping!r}")
+                             f"{', '.join(p.name for p in parameters)}, got {brief(mapping)}")
     known = {p.name: p for p in parameters}
     unknown = sorted(set(map(str, mapping)) - set(known))
     if unknown:

@@ -14,6 +14,8 @@ When the request depends on the state the voltage clamp is switched like the eff
 """
 from __future__ import annotations
 
+from math import isfinite
+
 from ..model import ParameterError
 from ..stability import worst_stiffness
 from .base import Channel, Effect, Parameter, clamp_guards, clamp_lines
@@ -57,6 +59,29 @@ class Motors(Effect):
         self.torque_constant, self.voltage_limit = torque_constant, voltage_limit
         self.state = ("i1", "i2") if self.windings else ()
         self.switching = False       # set by scene_effects: a clamp located as an event
+        self._check_derived()
+
+    def _check_derived(self) -> None:
+        """The quantities the dynamics and the step plan derive must be doubles too: a
+        torque_constant of 1e200 makes an electrical braking (k N)^2 / R beyond them."""
+        for i, (n, j) in enumerate(zip(self.gear_ratio, self.rotor_inertia)):
+            derived = [("reflected rotor inertia N^2 J", "kg m^2", lambda: n * n * j or 1.0)]
+            if self.windings:
+                k, r, l = self.torque_constant[i], self.resistance[i], self.inductance[i]
+                derived += [("motor constant k N", "N m/A", lambda: k * n),
+                            ("electrical braking (k N)^2 / R", "N m s/rad", lambda: (k * n) ** 2 / r),
+                            ("winding pole R / L", "1/s", lambda: r / l),
+                            ("drive gain R / (N k)", "V/(N m)", lambda: r / (n * k))]
+            for what, unit, value in derived:
+                try:
+                    finite = isfinite(value()) and value() > 0
+                except (OverflowError, ZeroDivisionError):
+                    finite = False
+                if not finite:
+                    raise ParameterError(
+                        f"motors: joint {i + 1}'s {what} ({unit}) is beyond double precision "
+                        "with these values; give gear_ratio, rotor_inertia, resistance, "
+                        "inductance and torque_constant at a motor's scale")
 
     @property
     def armature(self) -> tuple[float, float]:

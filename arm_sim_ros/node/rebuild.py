@@ -1,0 +1,49 @@
+"""A parameter change as a transaction: the new physics is built and checked aside, and only
+then takes the simulator's place; whatever fails is refused in the physics' words, and the
+simulator is left as it was."""
+from __future__ import annotations
+
+from math import isfinite
+
+from ..physics.effects import servo
+from ..physics.model import ParameterError
+from ..physics.scene import SceneError
+from ..physics.simulator import Simulator
+from .parameters import NodeConfig, ParameterRefused, blamed
+
+
+def build_simulator(config: NodeConfig, changed) -> Simulator:
+    """The simulator of `config`'s scene, or ParameterRefused naming the physics that cannot
+    be built (an arm whose mass matrix overflows, a plan that leaves double precision)."""
+    try:
+        return Simulator(config.scene)
+    except (ValueError, ArithmeticError) as error:
+        raise refusal(error, changed) from None
+
+
+def change_live(sim: Simulator, config: NodeConfig, names: list) -> None:
+    """Live effects `names` changed to `config`'s: the simulator carries on from its state
+    under them (a payload grasped or released first). A change the carried-over state cannot
+    take (a grasp whose momentum overflows) is refused with `sim` as it was."""
+    kept = dict(sim.__dict__)
+    try:
+        if "payload.mass" in names:     # grasp (momentum kept) or release (velocity kept)
+            sim.set_payload(config.values["payload.mass"] or 0.0)
+        if names != ["payload.mass"]:   # a servo's set-points carried, bumplessly
+            servo.change_scene(sim, config.scene.replace(payload=sim.scene.payload))
+        if not all(isfinite(v) for v in sim.state):
+            raise OverflowError("the carried-over state is not finite")
+    except (ValueError, ArithmeticError) as error:
+        sim.__dict__.clear()
+        sim.__dict__.update(kept)
+        raise refusal(error, names) from None
+
+
+def refusal(error: Exception, changed) -> ParameterRefused:
+    """The refusal of `changed` for a physics error, in the physics' words."""
+    if isinstance(error, (ParameterError, SceneError)):
+        reason = str(error)
+    else:   # Python's words (math range error) would not tell anyone which quantity
+        reason = ("the physics with these values leaves double precision (it overflows while "
+                  "the dynamics and its step plan are built); use values at a robot's scale")
+    return ParameterRefused(blamed(reason, list(changed)), reason)
