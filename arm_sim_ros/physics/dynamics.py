@@ -54,6 +54,7 @@ class Dynamics:
     arm: model.ArmParameters
     torque_function: object           # the same lines up to the joint torque: (t1, t2)
     command: list = field(default_factory=lambda: [0.0, 0.0])
+    decay: tuple = ()                 # the extra states' linear decay rates (R/L), 1/s
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -106,7 +107,8 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
-                    namespace["torque"], command if command is not None else [0.0, 0.0])
+                    namespace["torque"], command if command is not None else [0.0, 0.0],
+                    tuple(rate for effect in effects for rate in effect.linear_decay()))
 
 
 def body(effects, mode=None) -> list[str]:

@@ -19,7 +19,7 @@ from math import isfinite, nan
 from . import accuracy, guard, model, stability
 from .events import switching as switching_for
 from .dynamics import build_dynamics
-from .integrators import INTEGRATORS, compile_step
+from .integrators import INTEGRATORS, step_for
 from .scene import Scene
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
@@ -91,8 +91,8 @@ class Simulator:
         self.extra = self.dynamics.extra
         self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
         self._rhs = self.dynamics.function
-        self._step = compile_step(self._tableau, len(self.channels), rtol=scene.rtol,
-                                  atol=scene.atol, extra=len(self.extra))
+        self._step = step_for(self._tableau, len(self.channels), self.dynamics.decay,
+                              rtol=scene.rtol, atol=scene.atol)
         first = 4 + len(self.extra)
         kinds = self.dynamics.channel_kinds
         self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
