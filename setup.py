@@ -40,6 +40,7 @@ setup(
     extras_require={
         "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
         "bench": ["mujoco==4.0.0"],
+        "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled.py)
     },
     zip_safe=True,
     maintainer="arm_sim_ros developers",

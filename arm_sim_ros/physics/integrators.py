@@ -390,4 +390,5 @@ def compile_exponential_step(channels: int, decay):
     step = _exec(source, f"<exponential rk4 step, {len(decay)} linear, {channels} channels>",
                  namespace)["step"]
     step.source, step.decay = source, tuple(decay)
+    step.constants = {k: v for k, v in namespace.items() if k.startswith("LAM")}
     return step

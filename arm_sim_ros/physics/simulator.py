@@ -16,7 +16,7 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from math import isfinite, nan
 
-from . import accuracy, guard, model, stability
+from . import accuracy, compiled, guard, model, stability
 from .events import switching as switching_for
 from .dynamics import build_dynamics
 from .integrators import INTEGRATORS, step_for
@@ -105,9 +105,11 @@ class Simulator:
         self.switching = switching_for(      # friction, limits, clamps: events.py
             self.dynamics, self._tableau, self._step, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
+        self.kernel = compiled.kernel_for(self.dynamics, self._step, self.switching or self._driver)
+        self.path = getattr(self.kernel, "path", "python")     # compiled.py (extra `fast`)
         self.accuracy = accuracy.plan(   # the planned step, its error checked (accuracy.py)
-            self._tableau, self._step, self.substeps, scene.tolerance, 4, self._emit,
-            lambda: self.steps, self.switching, getattr(self, "accuracy", None))
+            self._tableau, getattr(self.kernel, "step", self._step), self.substeps, scene.tolerance,
+            4, self._emit, lambda: self.steps, self.switching, getattr(self, "accuracy", None))
 
     def reset(self) -> None:
         s = self.scene
@@ -257,13 +259,16 @@ class Simulator:
 
     def run(self, duration: float, on_step=None) -> float:
         """Advance by `duration` (whole steps); return the largest |residual| at any step."""
-        steps = self.scene.steps_for(duration, self.step_size)
-        largest = 0.0
-        for _ in range(steps):
-            self.step()
-            largest = max(largest, abs(self.residual()))
-            if on_step is not None:
-                on_step(self)
+        left = steps = self.scene.steps_for(duration, self.step_size)
+        largest, fast = 0.0, on_step is None and self.kernel is not None   # no callback
+        while left:
+            taken, largest = self.kernel.run(self, left, largest) if fast else (0, largest)
+            if not taken:
+                self.step()
+                largest = max(largest, abs(self.residual()))
+                if on_step is not None:
+                    on_step(self)
+            left -= taken or 1
         if steps and not self.holding:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest

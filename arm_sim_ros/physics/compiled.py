@@ -1,0 +1,253 @@
+"""The compiled path (extra `fast`: numba): the scene's generated code, compiled.
+
+The right-hand side (dynamics.py) and the step (integrators.py) are plain Python text. Here
+they are written once more into a module file named by the hash of that text, with three
+changes: the command the policies read becomes an argument K (a float array: the command,
+then, for Batch, the constants that vary per arm), f(...) becomes rhs(..., K), and every
+function is numba.njit(cache=True). A loop around them advances k plain steps (the planned
+equal sub-steps each) and keeps the largest |energy balance residual|, as Simulator.run
+does step by step; another advances every arm of a Batch, arms in parallel.
+
+The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
+and exp from the same libm: the states are the pure-Python path's bit for bit
+(test_compiled.py). numba caches the machine code next to the module file
+(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine.
+Without numba (or with ARM_SIM_COMPILED=0) nothing here is used.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import os
+import re
+import sys
+from pathlib import Path
+
+from . import guard, integrators
+
+try:                      # the optional extra: pip install -e '.[fast]'
+    import numba
+except ImportError:       # pragma: no cover - exercised where numba is absent
+    numba = None
+
+# Energy each effect stores (effects' stored_energy, the same operations in the same order);
+# an effect that stores energy and is not here keeps its scene on the Python path.
+STORED = {
+    "gravity": lambda e, arm: "%r * (%r * sin(q1) + %r * sin(q1 + q2))" % (
+        e.gravity, *arm.gravity_coefficients),
+    "springs": lambda e, arm: "0.5 * (%r * (q1 - %r) ** 2 + %r * (q2 - %r) ** 2)" % (
+        e.spring_constants[0], e.rest_positions[0], e.spring_constants[1], e.rest_positions[1]),
+    "motors": lambda e, arm: ("0.5 * (%r * x0 ** 2 + %r * x1 ** 2)" % tuple(e.inductance)
+                              if e.windings else "0.0"),
+}
+STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model")
+
+
+def available() -> bool:
+    """numba imports and ARM_SIM_COMPILED is not 0."""
+    return numba is not None and os.environ.get("ARM_SIM_COMPILED", "1") != "0"
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("ARM_SIM_CACHE") or Path.home() / ".cache" / "arm_sim_ros")
+
+
+def _signature(width: int) -> str:
+    return ", ".join(f"s{k}" for k in range(width))
+
+
+def rhs_source(dynamics, varying=()) -> str:
+    """The generated rhs with the command (and `varying` constants) read from K."""
+    lines = dynamics.source.replace("command[0]", "K[0]").replace("command[1]", "K[1]")
+    lines = lines.replace("MIN(", "min(").replace("MAX(", "max(").splitlines()
+    head = lines[0].replace("):", ", K):")
+    reads = [f"    {name} = K[{2 + j}]" for j, name in enumerate(varying)]
+    return "\n".join([head, *reads, *lines[1:]]) + "\n"
+
+
+def step_source(step) -> str:
+    """The generated step with f(...) the module's rhs(..., K)."""
+    source = step.source.replace("def step(f, y, h):", "def step(y, h, K):")
+    return re.sub(r"= f\(([^)]*)\)", r"= rhs(\1, K)", source)
+
+
+def energy_source(dynamics) -> str | None:
+    """residual(state, E0, R0, R1) as Simulator.residual computes it; None where an
+    effect's stored energy has no compiled form."""
+    arm, terms = dynamics.arm, []
+    for effect in dynamics.active:
+        if effect.name in STORED:
+            terms.append(STORED[effect.name](effect, arm))
+        elif effect.name not in STORELESS:
+            return None
+    width = 4 + len(dynamics.extra) + len(dynamics.channels)
+    first = 4 + len(dynamics.extra)
+    inputs = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "input"]
+    losses = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "loss"]
+    a, b, d, m22 = arm.mass_constants
+    extra = "".join(f"    x{k} = s{4 + k}\n" for k in range(len(dynamics.extra)))
+    stored = "0.0" + "".join(f" + {t}" for t in terms)
+    return (f"def residual(y, E0, R0, R1):\n    {_signature(width)}, = y\n"
+            f"    q1, q2, u1, u2 = s0, s1, s2, s3\n{extra}"
+            f"    c2 = cos(q2)\n    m11 = {a!r} + 2.0 * {b!r} * c2\n    m12 = {d!r} + {b!r} * c2\n"
+            f"    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + {m22!r} * u2 * u2)\n"
+            f"    stored = {stored}\n"
+            f"    work = R0{''.join(' + ' + s for s in inputs)}\n"
+            f"    lost = R1{''.join(' + ' + s for s in losses)}\n"
+            f"    return 0.0 + kinetic + stored - E0 - work + lost\n")
+
+
+KERNELS = '''
+@njit(cache=True)
+def advance(y, h, steps, substeps, K, E0, R0, R1, largest):
+    """Up to `steps` plain steps from y (in place); stops before a non-finite one.
+    (steps taken, largest |residual|)."""
+    state = ({items},)
+    dt = h / substeps
+    done = 0
+    for n in range(steps):
+        new = step(state, h, K) if substeps == 1 else state
+        if substeps > 1:
+            for k in range(substeps):
+                new = step(new, dt, K)
+        finite = True
+        for v in new:
+            finite = finite and isfinite(v)
+        if not finite:
+            break
+        state = new
+        done += 1
+        r = abs(residual(state, E0, R0, R1))
+        if r > largest:
+            largest = r
+    for k in range({width}):
+        y[k] = state[k]
+    return done, largest
+
+
+@njit(cache=True)
+def bare(y, h, total, K):
+    """`total` steps of h from y (in place), nothing else: the compiled limit."""
+    state = ({items},)
+    for n in range(total):
+        state = step(state, h, K)
+    for k in range({width}):
+        y[k] = state[k]
+
+
+@njit(cache=True, parallel=True)
+def advance_batch(Y, h, total, P):
+    """`total` steps of h for every arm (columns of Y, in place), arm a reading P[a]."""
+    for a in prange(Y.shape[1]):
+        K = P[a]
+        state = ({columns},)
+        for n in range(total):
+            state = step(state, h, K)
+        for k in range({width}):
+            Y[k, a] = state[k]
+'''
+
+
+def module_source(dynamics, step, varying=(), constants=None) -> str:
+    """The module: the rhs' constants, rhs, step, residual and the kernels, all njit."""
+    namespace = dynamics.function.__globals__ if constants is None else constants
+    rhs = rhs_source(dynamics, varying)
+    body = rhs + step_source(step)
+    names = sorted(set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", body)) - set(varying) - {"K"})
+    values = {**namespace, **getattr(step, "constants", {})}
+    lines = ["from math import cos, sin, exp, isfinite", "from numba import njit, prange", ""]
+    lines += [f"{name} = {float(values[name])!r}" for name in names  # (not the step's locals)
+              if name in values and name != "COEFFICIENTS"]
+    if "COEFFICIENTS" in body:        # the exponential step's coefficients, compiled too
+        lines += [f"PHI_SERIES = {integrators.PHI_SERIES!r}",
+                  "@njit(cache=True)\n" + inspect.getsource(integrators.phi),
+                  "@njit(cache=True)\n" + inspect.getsource(integrators.exponential_rk4),
+                  "COEFFICIENTS = exponential_rk4"]
+    width = 4 + len(dynamics.extra) + len(dynamics.channels)
+    energy = energy_source(dynamics) or (
+        f"def residual(y, E0, R0, R1):\n    return 0.0\n")
+    for function in (rhs, step_source(step), energy):
+        lines += ["@njit(cache=True)", function]
+    lines.append(KERNELS.format(items=", ".join(f"y[{k}]" for k in range(width)),
+                                columns=", ".join(f"Y[{k}, a]" for k in range(width)),
+                                width=width))
+    return "\n".join(lines) + "\n"
+
+
+def load(source: str):
+    """The module of `source`, written once to the cache directory under its hash."""
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    name = f"arm_sim_kernel_{digest}"
+    if name in sys.modules:
+        return sys.modules[name]
+    directory = cache_dir()
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{name}.py"
+    if not path.is_file() or path.read_text() != source:
+        temporary = path.with_suffix(f".{os.getpid()}.tmp")
+        temporary.write_text(source)
+        os.replace(temporary, path)        # atomic: two processes may write it at once
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+class Kernel:
+    """A simulator's compiled plain steps: advance(sim, steps) -> steps taken (stops before
+    a non-finite step, which Simulator.step then refuses as before)."""
+
+    path = "compiled (numba)"
+
+    def __init__(self, dynamics, step, exact_residual: bool):
+        import numpy as np
+        self.np, self.exact_residual = np, exact_residual
+        self.module = load(module_source(dynamics, step))
+        self.K = np.zeros(2)
+        self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
+        self.command = dynamics.command
+
+    def step(self, f, y, h):
+        """The scene's step(f, y, h) compiled (f is the scene's rhs: the accuracy books'
+        checks call it so), the command read now."""
+        self.K[0], self.K[1] = self.command
+        return self.module.step(y, h, self.K)
+
+    def run(self, sim, left: int, largest: float):
+        """(steps taken, largest |residual|) of Simulator.run: plain steps in one call, up
+        to the accuracy books' next check (`due`) and the next divergence check; 0 where a
+        step is not plain (a check due, diverged) or would not be finite: Simulator.step
+        takes that one."""
+        books = sim.accuracy
+        if sim.diverged or sim.steps >= books.due:
+            return 0, largest
+        count = min(left, books.due - sim.steps, guard.CHECK_EVERY - sim.steps % guard.CHECK_EVERY)
+        done, largest = self.advance(sim, count, books.substeps, largest)
+        sim.steps += done
+        if done and sim.steps % guard.CHECK_EVERY == 0:
+            sim._check_divergence()
+        return done, largest
+
+    def advance(self, sim, steps: int, substeps: int, largest: float):
+        """(steps taken, largest |residual| so far) from sim.state; sim.state updated."""
+        self.K[0], self.K[1] = self.command
+        y = self.y
+        y[:] = sim.state
+        done, largest = self.module.advance(y, sim.step_size, steps, substeps, self.K,
+                                            sim.initial_energy, *sim.retired, largest)
+        sim.state = tuple(y.tolist())
+        return done, largest
+
+
+def kernel_for(dynamics, step, stepped_elsewhere=None):
+    """The compiled kernel of a scene, or None (no numba, ARM_SIM_COMPILED=0, an adaptive
+    step, `stepped_elsewhere`: switches located or a driver checked step by step, or an
+    effect whose stored energy has no compiled form)."""
+    if (not available() or stepped_elsewhere is not None or not hasattr(step, "source")
+            or hasattr(step, "rtol")):
+        return None
+    if energy_source(dynamics) is None:
+        return None
+    return Kernel(dynamics, step, True)
