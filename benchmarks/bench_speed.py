@@ -5,13 +5,15 @@ sub-steps and MuJoCo's first-order dcmotor at equal step size.
 
 Columns (µs per simulated second, and steps per second):
   python     Simulator.run with ARM_SIM_COMPILED=0 (today's path), default tolerance
-  compiled   Simulator.run with the kernel (compiled.py), the same steps bit for bit
+  compiled   Simulator.run on the compiled path (compiled.py), the same steps bit for bit:
+             runs of plain steps in one call; switching scenes (events.py) step each mode's
+             compiled step from Python
   mujoco     mj_step in a Python loop, RK4, the scene built by tools/mujoco_peer (only where
              it models the same physics: no soft friction or limits, no controller model)
   limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
              no accuracy checks, no residual, no switching: friction's mode-free form)
-Each keeps the fastest of --repeat runs of --seconds simulated seconds (compiled after one
-warm-up run: the first compile is timed separately, as `first compile`).
+Each keeps the fastest of --repeat runs of --seconds simulated seconds after one warm-up run
+(`first`: that run, compiling what it meets or loading it from the cache).
 
     pip install -e '.[bench,fast]'
     nice python benchmarks/bench_speed.py [--seconds 2] [--repeat 3] [--arms 20000]
@@ -58,7 +60,7 @@ def time_run(scene, seconds: float, repeat: int, fast: bool):
     """(seconds of wall time for `seconds` simulated, path, first-call seconds)."""
     sim = simulator(scene, fast)
     start = time.perf_counter()
-    sim.run(min(seconds, 0.2))               # compiles (or loads the cache) on the compiled path
+    sim.run(seconds)       # compiles (or loads from the cache) every mode the run meets
     first = time.perf_counter() - start
 
     def run():

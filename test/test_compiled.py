@@ -60,8 +60,18 @@ def test_a_step_that_would_not_be_finite_is_refused_as_on_the_python_path(monkey
     assert fast.state == python.state and fast.refused_steps == python.refused_steps
 
 
-def test_switching_scenes_and_adaptive_steps_stay_on_the_python_path():
-    assert Simulator(load_scene("stick_slip")).path == "python"
+@pytest.mark.parametrize("name, seconds", [("stick_slip", 1.5), ("geared_arm", 0.1)])
+def test_switching_scenes_step_each_modes_compiled_step_bit_for_bit(name, seconds, monkeypatch):
+    python, fast = python_and_compiled(load_scene(name), monkeypatch)
+    for sim in (python, fast):
+        sim.set_command(2.0, -1.0)
+    assert python.run(seconds) == fast.run(seconds)
+    assert python.state == fast.state and python.switch_events == fast.switch_events
+    assert sum(python.switch_events.values()) > 0
+    assert python.accumulated_error == fast.accumulated_error
+
+
+def test_adaptive_steps_stay_on_the_python_path():
     assert Simulator(load_scene("release").replace(integrator="dopri5")).path == "python"
 
 

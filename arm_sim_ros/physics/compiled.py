@@ -41,7 +41,22 @@ STORED = {
     "motors": lambda e, arm: ("0.5 * (%r * x0 ** 2 + %r * x1 ** 2)" % tuple(e.inductance)
                               if e.windings else "0.0"),
 }
-STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model")
+
+
+def _limit_energy(e, arm) -> str:
+    """CompliantLimits.stored_energy, term by term (a hard limit stores none)."""
+    if e.hard:
+        return "0.0"
+    total = "0.0"
+    for j, (lo, hi) in enumerate(zip(e.lower, e.upper)):
+        over, under = f"(q{j + 1} - {hi!r})", f"(q{j + 1} - {lo!r})"
+        total = (f"({total} + 0.5 * ({over} + abs({over})) * 0.5 * ({over} + abs({over}))"
+                 f" + 0.5 * ({under} - abs({under})) * 0.5 * ({under} - abs({under})))")
+    return f"0.5 * {e.spring!r} * {total}"
+
+
+STORED["joint_limits"] = _limit_energy
+STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
 
 
 def available() -> bool:
@@ -57,9 +72,9 @@ def _signature(width: int) -> str:
     return ", ".join(f"s{k}" for k in range(width))
 
 
-def rhs_source(dynamics, varying=()) -> str:
+def rhs_source(source: str, varying=()) -> str:
     """The generated rhs with the command (and `varying` constants) read from K."""
-    lines = dynamics.source.replace("command[0]", "K[0]").replace("command[1]", "K[1]")
+    lines = source.replace("command[0]", "K[0]").replace("command[1]", "K[1]")
     lines = lines.replace("MIN(", "min(").replace("MAX(", "max(").splitlines()
     head = lines[0].replace("):", ", K):")
     reads = [f"    {name} = K[{2 + j}]" for j, name in enumerate(varying)]
@@ -149,10 +164,11 @@ def advance_batch(Y, h, total, P):
 '''
 
 
-def module_source(dynamics, step, varying=(), constants=None) -> str:
-    """The module: the rhs' constants, rhs, step, residual and the kernels, all njit."""
+def module_source(dynamics, step, varying=(), constants=None, rhs=None) -> str:
+    """The module: the rhs' constants, rhs (the scene's, or a mode's `rhs` source), step,
+    residual and the kernels, all njit."""
     namespace = dynamics.function.__globals__ if constants is None else constants
-    rhs = rhs_source(dynamics, varying)
+    rhs = rhs_source(dynamics.source if rhs is None else rhs, varying)
     body = rhs + step_source(step)
     names = sorted(set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", body)) - set(varying) - {"K"})
     values = {**namespace, **getattr(step, "constants", {})}
@@ -201,34 +217,33 @@ class Kernel:
 
     path = "compiled (numba)"
 
-    def __init__(self, dynamics, step, exact_residual: bool):
+    def __init__(self, dynamics, step, plain: bool):
         import numpy as np
-        self.np, self.exact_residual = np, exact_residual
+        self.plain = plain        # runs of plain steps (no switches, no driver check)
         self.module = load(module_source(dynamics, step))
         self.K = np.zeros(2)
         self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
         self.command = dynamics.command
 
-    def step(self, f, y, h):
-        """The scene's step(f, y, h) compiled (f is the scene's rhs: the accuracy books'
-        checks call it so), the command read now."""
-        self.K[0], self.K[1] = self.command
-        return self.module.step(y, h, self.K)
 
     def run(self, sim, left: int, largest: float):
-        """(steps taken, largest |residual|) of Simulator.run: plain steps in one call, up
-        to the accuracy books' next check (`due`) and the next divergence check; 0 where a
-        step is not plain (a check due, diverged) or would not be finite: Simulator.step
-        takes that one."""
+        """(steps taken, largest |residual|) of Simulator.run without a callback: plain
+        steps in one call, up to the accuracy books' next check (`due`) and the next
+        divergence check; else (a check due, a switching scene, diverged, a step that would
+        not be finite) one Simulator.step, its residual compiled."""
         books = sim.accuracy
-        if sim.diverged or sim.steps >= books.due:
-            return 0, largest
-        count = min(left, books.due - sim.steps, guard.CHECK_EVERY - sim.steps % guard.CHECK_EVERY)
-        done, largest = self.advance(sim, count, books.substeps, largest)
-        sim.steps += done
-        if done and sim.steps % guard.CHECK_EVERY == 0:
-            sim._check_divergence()
-        return done, largest
+        if self.plain and not sim.diverged and sim.steps < books.due:
+            count = min(left, books.due - sim.steps,
+                        guard.CHECK_EVERY - sim.steps % guard.CHECK_EVERY)
+            done, largest = self.advance(sim, count, books.substeps, largest)
+            sim.steps += done
+            if done and sim.steps % guard.CHECK_EVERY == 0:
+                sim._check_divergence()
+            if done:
+                return done, largest
+        sim.step()
+        self.y[:] = sim.state
+        return 1, max(largest, abs(self.module.residual(self.y, sim.initial_energy, *sim.retired)))
 
     def advance(self, sim, steps: int, substeps: int, largest: float):
         """(steps taken, largest |residual| so far) from sim.state; sim.state updated."""
@@ -241,13 +256,44 @@ class Kernel:
         return done, largest
 
 
+class Steps:
+    """step(f, y, h) compiled for each right-hand side f it is given: the scene's, and each
+    mode's of a switching scene (events.py steps them; dynamics.mode_functions gives their
+    source), compiled when first met, the command read at each call."""
+
+    path = "compiled (numba)"
+
+    def __init__(self, dynamics, step):
+        import numpy as np
+        self.dynamics, self.python, self.K = dynamics, step, np.zeros(2)
+        self.command, self.compiled = dynamics.command, {}
+
+    def __call__(self, f, y, h):
+        step = self.compiled.get(f)
+        if step is None:
+            source = None if f is self.dynamics.function else getattr(f, "source", None)
+            if source is None and f is not self.dynamics.function:
+                step = self.compiled[f] = lambda y, h, K, f=f: self.python(f, y, h)
+            else:
+                step = self.compiled[f] = load(module_source(self.dynamics, self.python,
+                                                             rhs=source)).step
+        self.K[0], self.K[1] = self.command
+        return step(y, h, self.K)
+
+
+def steps_for(dynamics, step):
+    """The compiled Steps of a fixed-step scene, or `step` itself (no numba, adaptive)."""
+    if not available() or not hasattr(step, "source") or hasattr(step, "rtol"):
+        return step
+    return Steps(dynamics, step)
+
+
 def kernel_for(dynamics, step, stepped_elsewhere=None):
     """The compiled kernel of a scene, or None (no numba, ARM_SIM_COMPILED=0, an adaptive
-    step, `stepped_elsewhere`: switches located or a driver checked step by step, or an
-    effect whose stored energy has no compiled form)."""
-    if (not available() or stepped_elsewhere is not None or not hasattr(step, "source")
-            or hasattr(step, "rtol")):
+    step, or an effect whose stored energy has no compiled form); `stepped_elsewhere`
+    (switches located, a driver checked step by step): its residual only."""
+    if not available() or not hasattr(step, "source") or hasattr(step, "rtol"):
         return None
     if energy_source(dynamics) is None:
         return None
-    return Kernel(dynamics, step, True)
+    return Kernel(dynamics, step, stepped_elsewhere is None)

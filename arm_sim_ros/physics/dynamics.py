@@ -154,8 +154,8 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     lines = body(dynamics.active, mode) + CONSTRAINED_SOLVE[fixed]
     channels = [c.rate for c in merged_channels(dynamics.active)]
     returned = ["a1", "a2"] + rates(dynamics.active) + channels
-    source = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)]
-                       + [f"def probe({signature}):"] + lines
+    rhs = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)])
+    source = "\n".join([rhs, f"def probe({signature}):"] + lines
                        + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
     terms = stage_terms(dynamics.active, mode)
     values = f"({', '.join(guards)},)" if guards else "()"
@@ -173,6 +173,7 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
                              + [f"    return ({', '.join(requests)},)"]) + "\n"
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
+    namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 
 

@@ -102,14 +102,15 @@ class Simulator:
         if message:
             self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
+        step = compiled.steps_for(self.dynamics, self._step)   # compiled.py (extra `fast`)
         self.switching = switching_for(      # friction, limits, clamps: events.py
-            self.dynamics, self._tableau, self._step, self.substeps, self._emit,
+            self.dynamics, self._tableau, step, self.substeps, self._emit,
             lambda: self.time, getattr(self, "switch_events", None))
         self.kernel = compiled.kernel_for(self.dynamics, self._step, self.switching or self._driver)
-        self.path = getattr(self.kernel, "path", "python")     # compiled.py (extra `fast`)
+        self.path = getattr(step, "path", "python")
         self.accuracy = accuracy.plan(   # the planned step, its error checked (accuracy.py)
-            self._tableau, getattr(self.kernel, "step", self._step), self.substeps, scene.tolerance,
-            4, self._emit, lambda: self.steps, self.switching, getattr(self, "accuracy", None))
+            self._tableau, step, self.substeps, scene.tolerance, 4, self._emit,
+            lambda: self.steps, self.switching, getattr(self, "accuracy", None))
 
     def reset(self) -> None:
         s = self.scene
@@ -262,13 +263,12 @@ class Simulator:
         left = steps = self.scene.steps_for(duration, self.step_size)
         largest, fast = 0.0, on_step is None and self.kernel is not None   # no callback
         while left:
-            taken, largest = self.kernel.run(self, left, largest) if fast else (0, largest)
-            if not taken:
+            taken, largest = self.kernel.run(self, left, largest) if fast else (1, largest)
+            if not fast:
                 self.step()
                 largest = max(largest, abs(self.residual()))
-                if on_step is not None:
-                    on_step(self)
-            left -= taken or 1
+                if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
+            left -= taken
         if steps and not self.holding:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest
