@@ -6,7 +6,8 @@ changes: the command the policies read becomes an argument K (a float array: the
 then, for Batch, the constants that vary per arm), f(...) becomes rhs(..., K), and every
 function is numba.njit(cache=True). A loop around them advances k plain steps (the planned
 equal sub-steps each) and keeps the largest |energy balance residual|, as Simulator.run
-does step by step; another advances every arm of a Batch, arms in parallel.
+does step by step; another advances every arm of a Batch, arms in parallel. A switching
+scene's modes (events.py) each get their rhs compiled with the step when first met.
 
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit
@@ -60,8 +61,14 @@ STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_mode
 
 
 def available() -> bool:
-    """numba imports and ARM_SIM_COMPILED is not 0."""
-    return numba is not None and os.environ.get("ARM_SIM_COMPILED", "1") != "0"
+    """numba imports, ARM_SIM_COMPILED is not 0 and the cache directory is writable."""
+    if numba is None or os.environ.get("ARM_SIM_COMPILED", "1") == "0":
+        return False
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(cache_dir(), os.W_OK)
 
 
 def cache_dir() -> Path:
@@ -142,6 +149,12 @@ def advance(y, h, steps, substeps, K, E0, R0, R1, largest):
 
 
 @njit(cache=True)
+def step_array(y, h, K):
+    """One step from the array y (numba types an array argument faster than a tuple)."""
+    return step(({items},), h, K)
+
+
+@njit(cache=True)
 def bare(y, h, total, K):
     """`total` steps of h from y (in place), nothing else: the compiled limit."""
     state = ({items},)
@@ -212,8 +225,8 @@ def load(source: str):
 
 
 class Kernel:
-    """A simulator's compiled plain steps: advance(sim, steps) -> steps taken (stops before
-    a non-finite step, which Simulator.step then refuses as before)."""
+    """A simulator's compiled runs of plain steps and its compiled energy residual
+    (Simulator.run without a per-step callback calls `run`)."""
 
     path = "compiled (numba)"
 
@@ -224,7 +237,6 @@ class Kernel:
         self.K = np.zeros(2)
         self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
         self.command = dynamics.command
-
 
     def run(self, sim, left: int, largest: float):
         """(steps taken, largest |residual|) of Simulator.run without a callback: plain
@@ -266,6 +278,7 @@ class Steps:
     def __init__(self, dynamics, step):
         import numpy as np
         self.dynamics, self.python, self.K = dynamics, step, np.zeros(2)
+        self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
         self.command, self.compiled = dynamics.command, {}
 
     def __call__(self, f, y, h):
@@ -273,12 +286,13 @@ class Steps:
         if step is None:
             source = None if f is self.dynamics.function else getattr(f, "source", None)
             if source is None and f is not self.dynamics.function:
-                step = self.compiled[f] = lambda y, h, K, f=f: self.python(f, y, h)
+                step = self.compiled[f] = lambda y, h, K, f=f: self.python(f, tuple(y), h)
             else:
                 step = self.compiled[f] = load(module_source(self.dynamics, self.python,
-                                                             rhs=source)).step
+                                                             rhs=source)).step_array
         self.K[0], self.K[1] = self.command
-        return step(y, h, self.K)
+        self.y[:] = y
+        return step(self.y, h, self.K)
 
 
 def steps_for(dynamics, step):
