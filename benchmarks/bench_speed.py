@@ -72,8 +72,12 @@ def time_run(scene, seconds: float, repeat: int, fast: bool):
 def time_limit(scene, seconds: float, repeat: int) -> float:
     """The bare compiled RK4 loop on the scene's rhs (compiled.bare: steps, nothing else)."""
     sim = simulator(scene, False)
-    module = compiled.load(compiled.module_source(build_dynamics(scene), sim._step))
-    y0, command = np.array(sim.state, dtype=float), np.zeros(2)
+    dynamics = build_dynamics(scene)
+    source, names = compiled.module_source(dynamics, sim._step)
+    module = compiled.load(source)
+    command = compiled.constants_of(names, {**dynamics.function.__globals__,
+                                            **getattr(sim._step, "constants", {})})
+    y0 = np.array(sim.state, dtype=float)
     steps = scene.steps_for(seconds) * sim.substeps
     h = scene.step_size / sim.substeps
     module.bare(y0.copy(), h, 1, command)

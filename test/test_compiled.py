@@ -81,10 +81,15 @@ def test_without_it_nothing_is_compiled(monkeypatch):
     assert Simulator(load_scene("release")).kernel is None
 
 
-def test_the_kernel_is_cached_under_the_hash_of_its_source(tmp_path, monkeypatch):
+def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure(tmp_path,
+                                                                            monkeypatch):
+    """Parameter values are read at run time: a sweep over them compiles once."""
     monkeypatch.setenv("ARM_SIM_CACHE", str(tmp_path))
-    sim = Simulator(load_scene("damped_release").replace(damping=0.123))
-    sim.run(0.5)
+    sims = [Simulator(load_scene("damped_release").replace(damping=d, link_masses=(1.0, m)))
+            for d, m in ((0.123, 1.0), (0.7, 2.5))]
+    for sim in sims:
+        sim.run(0.5)
     files = sorted(p.name for p in tmp_path.glob("arm_sim_kernel_*.py"))
-    assert len(files) == 1 and sim.kernel.module.__name__ + ".py" == files[0]
-    assert math.isfinite(sim.state[0])
+    assert len(files) == 1 and sims[0].kernel.module.__name__ + ".py" == files[0]
+    assert sims[1].kernel.module is sims[0].kernel.module
+    assert sims[0].state != sims[1].state and math.isfinite(sims[1].state[0])

@@ -150,10 +150,8 @@ class Batch:
         self.substeps = self._worst_substeps(scene, v, arm)
         self._kernel = None
         if compiled.available():     # every arm in one compiled call (compiled.py)
-            varying = [k for k, c in self._constants.items() if not isinstance(c, float)]
-            self._kernel = compiled.load(compiled.module_source(
-                dynamics, self._step, varying, dict(self._namespace, **self._constants)))
-            self._varying = varying
+            source, self._names = compiled.module_source(dynamics, self._step)
+            self._kernel = compiled.load(source)
 
     @property
     def path(self) -> str:
@@ -164,8 +162,9 @@ class Batch:
         """Every arm `steps` steps in one compiled call, arms split over `threads`."""
         numba = compiled.numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-        columns = [*self.command, *(self._constants[k] for k in self._varying)]
-        parameters = np.ascontiguousarray(np.stack(columns, axis=1))
+        values = dict(self._namespace, **self._constants)
+        columns = [*self.command, *(np.broadcast_to(values[k], (self.count,)) for k in self._names)]
+        parameters = np.ascontiguousarray(np.stack(columns, axis=1), dtype=float)
         state = np.array(self.state)
         self._kernel.advance_batch(state, self.step_size / self.substeps,
                                    steps * self.substeps, parameters)

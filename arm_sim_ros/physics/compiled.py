@@ -35,25 +35,27 @@ except ImportError:       # pragma: no cover - exercised where numba is absent
 # Energy each effect stores (effects' stored_energy, the same operations in the same order);
 # an effect that stores energy and is not here keeps its scene on the Python path.
 STORED = {
-    "gravity": lambda e, arm: "%r * (%r * sin(q1) + %r * sin(q1 + q2))" % (
-        e.gravity, *arm.gravity_coefficients),
-    "springs": lambda e, arm: "0.5 * (%r * (q1 - %r) ** 2 + %r * (q2 - %r) ** 2)" % (
-        e.spring_constants[0], e.rest_positions[0], e.spring_constants[1], e.rest_positions[1]),
-    "motors": lambda e, arm: ("0.5 * (%r * x0 ** 2 + %r * x1 ** 2)" % tuple(e.inductance)
-                              if e.windings else "0.0"),
+    "gravity": lambda e, arm: (["gravity", "k1", "k2"], "{0} * ({1} * sin(q1) + {2} * sin(q1 + q2))",
+                               [e.gravity, *arm.gravity_coefficients]),
+    "springs": lambda e, arm: ([], "0.5 * ({0} * (q1 - {1}) ** 2 + {2} * (q2 - {3}) ** 2)",
+                               [e.spring_constants[0], e.rest_positions[0],
+                                e.spring_constants[1], e.rest_positions[1]]),
+    "motors": lambda e, arm: ([], "0.5 * ({0} * x0 ** 2 + {1} * x1 ** 2)" if e.windings
+                              else "0.0", list(e.inductance) if e.windings else []),
 }
 
 
-def _limit_energy(e, arm) -> str:
+def _limit_energy(e, arm):
     """CompliantLimits.stored_energy, term by term (a hard limit stores none)."""
     if e.hard:
-        return "0.0"
-    total = "0.0"
+        return [], "0.0", []
+    total, values = "0.0", [e.spring]
     for j, (lo, hi) in enumerate(zip(e.lower, e.upper)):
-        over, under = f"(q{j + 1} - {hi!r})", f"(q{j + 1} - {lo!r})"
+        over, under = f"(q{j + 1} - {{{len(values)}}})", f"(q{j + 1} - {{{len(values) + 1}}})"
+        values += [hi, lo]
         total = (f"({total} + 0.5 * ({over} + abs({over})) * 0.5 * ({over} + abs({over}))"
                  f" + 0.5 * ({under} - abs({under})) * 0.5 * ({under} - abs({under})))")
-    return f"0.5 * {e.spring!r} * {total}"
+    return [], "0.5 * {0} * " + total, values
 
 
 STORED["joint_limits"] = _limit_energy
@@ -79,50 +81,58 @@ def _signature(width: int) -> str:
     return ", ".join(f"s{k}" for k in range(width))
 
 
-def rhs_source(source: str, varying=()) -> str:
-    """The generated rhs with the command (and `varying` constants) read from K."""
+def _reads(names) -> list[str]:
+    """The lines that read the constants `names` from K (after the command: K[0], K[1])."""
+    return [f"    {name} = K[{2 + j}]" for j, name in enumerate(names)]
+
+
+def rhs_source(source: str, names) -> str:
+    """The generated rhs with the command and the constants `names` read from K."""
     lines = source.replace("command[0]", "K[0]").replace("command[1]", "K[1]")
     lines = lines.replace("MIN(", "min(").replace("MAX(", "max(").splitlines()
-    head = lines[0].replace("):", ", K):")
-    reads = [f"    {name} = K[{2 + j}]" for j, name in enumerate(varying)]
-    return "\n".join([head, *reads, *lines[1:]]) + "\n"
+    return "\n".join([lines[0].replace("):", ", K):"), *_reads(names), *lines[1:]]) + "\n"
 
 
-def step_source(step) -> str:
-    """The generated step with f(...) the module's rhs(..., K)."""
-    source = step.source.replace("def step(f, y, h):", "def step(y, h, K):")
+def step_source(step, names) -> str:
+    """The generated step with f(...) the module's rhs(..., K), its constants from K."""
+    source = step.source.replace("def step(f, y, h):", "def step(y, h, K):\n"
+                                 + "\n".join(_reads(names)))
     return re.sub(r"= f\(([^)]*)\)", r"= rhs(\1, K)", source)
 
 
-def energy_source(dynamics) -> str | None:
-    """residual(state, E0, R0, R1) as Simulator.residual computes it; None where an
-    effect's stored energy has no compiled form."""
+def energy_source(dynamics):
+    """(source, values): residual(y, K, E0, R0, R1) as Simulator.residual computes it, its
+    constants read from K[2:] in the order of `values`; None where an effect's stored
+    energy has no compiled form."""
     arm, terms = dynamics.arm, []
+    values = list(arm.mass_constants)
     for effect in dynamics.active:
         if effect.name in STORED:
-            terms.append(STORED[effect.name](effect, arm))
+            _, text, numbers = STORED[effect.name](effect, arm)
+            terms.append(text.format(*(f"EC{len(values) + n}" for n in range(len(numbers)))))
+            values += numbers
         elif effect.name not in STORELESS:
             return None
     width = 4 + len(dynamics.extra) + len(dynamics.channels)
     first = 4 + len(dynamics.extra)
     inputs = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "input"]
     losses = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "loss"]
-    a, b, d, m22 = arm.mass_constants
     extra = "".join(f"    x{k} = s{4 + k}\n" for k in range(len(dynamics.extra)))
+    reads = "".join(f"    EC{n} = K[{2 + n}]\n" for n in range(len(values)))
     stored = "0.0" + "".join(f" + {t}" for t in terms)
-    return (f"def residual(y, E0, R0, R1):\n    {_signature(width)}, = y\n"
+    return (f"def residual(y, K, E0, R0, R1):\n    {_signature(width)}, = y\n{reads}"
             f"    q1, q2, u1, u2 = s0, s1, s2, s3\n{extra}"
-            f"    c2 = cos(q2)\n    m11 = {a!r} + 2.0 * {b!r} * c2\n    m12 = {d!r} + {b!r} * c2\n"
-            f"    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + {m22!r} * u2 * u2)\n"
+            f"    c2 = cos(q2)\n    m11 = EC0 + 2.0 * EC1 * c2\n    m12 = EC2 + EC1 * c2\n"
+            f"    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + EC3 * u2 * u2)\n"
             f"    stored = {stored}\n"
             f"    work = R0{''.join(' + ' + s for s in inputs)}\n"
             f"    lost = R1{''.join(' + ' + s for s in losses)}\n"
-            f"    return 0.0 + kinetic + stored - E0 - work + lost\n")
+            f"    return 0.0 + kinetic + stored - E0 - work + lost\n"), values
 
 
 KERNELS = '''
 @njit(cache=True)
-def advance(y, h, steps, substeps, K, E0, R0, R1, largest):
+def advance(y, h, steps, substeps, K, C, E0, R0, R1, largest):
     """Up to `steps` plain steps from y (in place); stops before a non-finite one.
     (steps taken, largest |residual|)."""
     state = ({items},)
@@ -140,7 +150,7 @@ def advance(y, h, steps, substeps, K, E0, R0, R1, largest):
             break
         state = new
         done += 1
-        r = abs(residual(state, E0, R0, R1))
+        r = abs(residual(state, C, E0, R0, R1))
         if r > largest:
             largest = r
     for k in range({width}):
@@ -177,31 +187,37 @@ def advance_batch(Y, h, total, P):
 '''
 
 
-def module_source(dynamics, step, varying=(), constants=None, rhs=None) -> str:
-    """The module: the rhs' constants, rhs (the scene's, or a mode's `rhs` source), step,
-    residual and the kernels, all njit."""
-    namespace = dynamics.function.__globals__ if constants is None else constants
-    rhs = rhs_source(dynamics.source if rhs is None else rhs, varying)
-    body = rhs + step_source(step)
-    names = sorted(set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", body)) - set(varying) - {"K"})
-    values = {**namespace, **getattr(step, "constants", {})}
+def module_source(dynamics, step, rhs=None):
+    """(source, constant names): the module of rhs (the scene's, or a mode's `rhs` source),
+    step, residual and the kernels, all njit. Constants are read from K (constants_of),
+    not written in: the source, and so the compiled code, depends on the scene's structure
+    only, not on its parameter values (a parameter sweep compiles once)."""
+    rhs = dynamics.source if rhs is None else rhs
+    values = {**dynamics.function.__globals__, **getattr(step, "constants", {})}
+    found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source))
+    names = sorted(n for n in found if n in values and isinstance(values[n], (int, float))
+                   and not isinstance(values[n], bool))
     lines = ["from math import cos, sin, exp, isfinite", "from numba import njit, prange", ""]
-    lines += [f"{name} = {float(values[name])!r}" for name in names  # (not the step's locals)
-              if name in values and name != "COEFFICIENTS"]
-    if "COEFFICIENTS" in body:        # the exponential step's coefficients, compiled too
+    if "COEFFICIENTS" in step.source:    # the exponential step's coefficients, compiled too
         lines += [f"PHI_SERIES = {integrators.PHI_SERIES!r}",
                   "@njit(cache=True)\n" + inspect.getsource(integrators.phi),
                   "@njit(cache=True)\n" + inspect.getsource(integrators.exponential_rk4),
                   "COEFFICIENTS = exponential_rk4"]
     width = 4 + len(dynamics.extra) + len(dynamics.channels)
-    energy = energy_source(dynamics) or (
-        f"def residual(y, E0, R0, R1):\n    return 0.0\n")
-    for function in (rhs, step_source(step), energy):
+    energy = energy_source(dynamics)
+    residual = energy[0] if energy else "def residual(y, K, E0, R0, R1):\n    return 0.0\n"
+    for function in (rhs_source(rhs, names), step_source(step, names), residual):
         lines += ["@njit(cache=True)", function]
     lines.append(KERNELS.format(items=", ".join(f"y[{k}]" for k in range(width)),
                                 columns=", ".join(f"Y[{k}, a]" for k in range(width)),
                                 width=width))
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n", names
+
+
+def constants_of(names, values, command=(0.0, 0.0)):
+    """K: the command, then the constants `names` (floats; Batch: per-arm arrays too)."""
+    import numpy as np
+    return np.array([command[0], command[1], *(values[n] for n in names)], dtype=float)
 
 
 def load(source: str):
@@ -233,8 +249,11 @@ class Kernel:
     def __init__(self, dynamics, step, plain: bool):
         import numpy as np
         self.plain = plain        # runs of plain steps (no switches, no driver check)
-        self.module = load(module_source(dynamics, step))
-        self.K = np.zeros(2)
+        source, names = module_source(dynamics, step)
+        self.module = load(source)
+        self.K = constants_of(names, {**dynamics.function.__globals__,
+                                      **getattr(step, "constants", {})})
+        self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
         self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
         self.command = dynamics.command
 
@@ -255,14 +274,15 @@ class Kernel:
                 return done, largest
         sim.step()
         self.y[:] = sim.state
-        return 1, max(largest, abs(self.module.residual(self.y, sim.initial_energy, *sim.retired)))
+        residual = self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
+        return 1, max(largest, abs(residual))
 
     def advance(self, sim, steps: int, substeps: int, largest: float):
         """(steps taken, largest |residual| so far) from sim.state; sim.state updated."""
         self.K[0], self.K[1] = self.command
         y = self.y
         y[:] = sim.state
-        done, largest = self.module.advance(y, sim.step_size, steps, substeps, self.K,
+        done, largest = self.module.advance(y, sim.step_size, steps, substeps, self.K, self.C,
                                             sim.initial_energy, *sim.retired, largest)
         sim.state = tuple(y.tolist())
         return done, largest
@@ -277,22 +297,27 @@ class Steps:
 
     def __init__(self, dynamics, step):
         import numpy as np
-        self.dynamics, self.python, self.K = dynamics, step, np.zeros(2)
+        self.dynamics, self.python = dynamics, step
         self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
         self.command, self.compiled = dynamics.command, {}
 
     def __call__(self, f, y, h):
-        step = self.compiled.get(f)
-        if step is None:
-            source = None if f is self.dynamics.function else getattr(f, "source", None)
-            if source is None and f is not self.dynamics.function:
-                step = self.compiled[f] = lambda y, h, K, f=f: self.python(f, tuple(y), h)
-            else:
-                step = self.compiled[f] = load(module_source(self.dynamics, self.python,
-                                                             rhs=source)).step_array
-        self.K[0], self.K[1] = self.command
+        known = self.compiled.get(f)
+        if known is None:
+            known = self.compiled[f] = self.compile(f)
+        step, K = known
+        K[0], K[1] = self.command
         self.y[:] = y
-        return step(self.y, h, self.K)
+        return step(self.y, h, K)
+
+    def compile(self, f):
+        """(step_array, K) of the module of rhs f; a function without source: Python's."""
+        source = None if f is self.dynamics.function else getattr(f, "source", None)
+        if source is None and f is not self.dynamics.function:
+            return (lambda y, h, K: self.python(f, tuple(y), h)), [0.0, 0.0]
+        text, names = module_source(self.dynamics, self.python, rhs=source)
+        values = {**self.dynamics.function.__globals__, **getattr(self.python, "constants", {})}
+        return load(text).step_array, constants_of(names, values)
 
 
 def steps_for(dynamics, step):
