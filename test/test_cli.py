@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from arm_sim_ros.physics import compiled
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
@@ -44,7 +45,8 @@ def test_run_json_has_the_documented_keys_and_values(capsys):
     assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
                            "channels", "residual", "max_abs_energy_drift", "fault",
                            "refused_steps", "interrupted_at", "error_estimate",
-                           "accumulated_error"}
+                           "accumulated_error", "path"}
+    assert result["path"] == ("compiled (numba)" if compiled.available() else "python")
     assert result["channels"] == {}          # the release has no actuator and no damping
     assert result["t"] == 0.5
     assert [f"{x:.6f}" for x in result["q"]] == ["-1.122654", "0.593820"]

@@ -155,6 +155,8 @@ class Accuracy:
         if self.stepper is not None:
             return self.switching(f, y, h, index, n)
         y1, error, scaled, signed = self.measure(f, y, h, n)
+        if scaled - scaled != 0.0:     # a step that leaves the finite numbers: refused as it
+            return y1                  # is (simulator.py), nothing to control or book
         first, wanted = scaled, n
         if self.tolerance:
             wanted = self.free.ask(self.ratio(scaled, h), self.order)

@@ -54,6 +54,7 @@ class Dynamics:
     arm: model.ArmParameters
     torque_function: object           # the same lines up to the joint torque: (t1, t2)
     command: list = field(default_factory=lambda: [0.0, 0.0])
+    decay: tuple = ()                 # the extra states' linear decay rates (R/L), 1/s
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -108,7 +109,8 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
-                    namespace["torque"], command if command is not None else [0.0, 0.0])
+                    namespace["torque"], command if command is not None else [0.0, 0.0],
+                    tuple(rate for effect in effects for rate in effect.linear_decay()))
 
 
 def body(effects, mode=None) -> list[str]:
@@ -154,8 +156,8 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     lines = body(dynamics.active, mode) + CONSTRAINED_SOLVE[fixed]
     channels = [c.rate for c in merged_channels(dynamics.active)]
     returned = ["a1", "a2"] + rates(dynamics.active) + channels
-    source = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)]
-                       + [f"def probe({signature}):"] + lines
+    rhs = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)])
+    source = "\n".join([rhs, f"def probe({signature}):"] + lines
                        + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
     terms = stage_terms(dynamics.active, mode)
     values = f"({', '.join(guards)},)" if guards else "()"
@@ -173,6 +175,7 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
                              + [f"    return ({', '.join(requests)},)"]) + "\n"
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
+    namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 
 

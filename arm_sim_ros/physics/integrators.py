@@ -19,7 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from math import lcm, nan
+from functools import lru_cache
+from math import exp, lcm, nan
 
 F = Fraction
 
@@ -123,7 +124,15 @@ DOPRI5 = ButcherTableau(
     description="Dormand-Prince 5(4), error-controlled",
 )
 
-INTEGRATORS = {t.name: t for t in (RK4, EULER, SEMI_IMPLICIT_EULER, MIDPOINT, RK38, DOPRI5)}
+# RK4's tableau; its step integrates the winding currents' decay -R/L exactly (exponential
+# RK4, below): with windings L/R << h it needs no sub-steps for them. Without extra states
+# it is RK4, bit for bit.
+EXPONENTIAL_RK4 = ButcherTableau(
+    "exponential_rk4", c=RK4.c, a=RK4.a, b=RK4.b, order=4,
+    description="classical Runge-Kutta; winding currents by exponential RK4 (Krogstad)")
+
+INTEGRATORS = {t.name: t for t in (RK4, EULER, SEMI_IMPLICIT_EULER, MIDPOINT, RK38, DOPRI5,
+                                   EXPONENTIAL_RK4)}
 
 MECHANICAL = ("q1", "q2", "u1", "u2")
 STAGE_INPUTS = ("p1", "p2", "v1", "v2")
@@ -282,4 +291,105 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
     step.source = source
     step.rtol, step.atol, step.last_error = float(rtol), float(atol), 0.0
     step.channels = channels
+    return step
+
+
+# --- Exponential RK4: stiff linear decays (winding currents) integrated exactly ------------
+#
+# An extra state x with x' = -lam x + N(s) (a winding: lam = R/L, N = (V - k N q̇)/L) is
+# advanced by an exponential Runge-Kutta method (Hochbruck & Ostermann, Acta Numerica 2010,
+# eq. 2.22 with Krogstad's stages): stage k = e^(c z) x + h sum a(z) N, z = -h lam, with
+# weights of the phi functions of z. lam -> 0 gives back classical RK4, so the mechanics
+# and the books keep RK4's weights from the same stages; the pole -lam is exact for any h
+# (a winding with L/R << h needs no sub-steps, and decays as it should: passive).
+
+PHI_SERIES = 0.5     # |z| below this: the phi functions by their series (no cancellation)
+
+
+def phi(z: float):
+    """(e^z, phi1(z), phi2(z), phi3(z)) with phi_k(z) = sum_n z^n / (n + k)!."""
+    if z > -PHI_SERIES:
+        p3, term = 0.0, 1.0
+        for n in range(3, 20):       # 1/n! ... |z|^17/20! < 1e-23 at |z| = 0.5
+            term /= n if n > 3 else 6.0
+            p3 = p3 + term * z ** (n - 3)
+        p2 = 0.5 + z * p3
+        p1 = 1.0 + z * p2
+        return 1.0 + z * p1, p1, p2, p3
+    e = exp(z)
+    p1 = (e - 1.0) / z
+    p2 = (p1 - 1.0) / z
+    return e, p1, p2, (p2 - 0.5) / z
+
+
+def exponential_rk4(z: float):
+    """(e^(z/2), e^z, a21, a31, a32, a41, a43, b1, b2, b3, b4) of the exponential RK4 for
+    the linear part z = -h lam (a42 = 0); z = 0: classical RK4's coefficients."""
+    e2, h1, h2, _ = phi(0.5 * z)
+    e, p1, p2, p3 = phi(z)
+    return (e2, e, 0.5 * h1, 0.5 * h1 - h2, h2, p1 - 2.0 * p2, 2.0 * p2,
+            p1 - 3.0 * p2 + 4.0 * p3, 2.0 * p2 - 4.0 * p3, 2.0 * p2 - 4.0 * p3, 4.0 * p3 - p2)
+
+
+# Stage inputs of the linear state k at stages 1-3 and its update (names of the tuple above)
+_EXP_STAGES = (("E2", ("A21",)), ("E2", ("A31", "A32")), ("E1", ("A41", None, "A43")))
+_EXP_NAMES = ("E2", "E1", "A21", "A31", "A32", "A41", "A43", "B1", "B2", "B3", "B4")
+
+
+def exponential_step_source(channels: int, extra: int, name: str = "step") -> str:
+    """The straight-line source of the exponential RK4 step (step(f, y, h); reads the
+    decay rates LAM0, LAM1 ... and COEFFICIENTS = exponential_rk4 from its globals)."""
+    state = _state(extra, channels)
+    lines = [f"def {name}(f, y, h):", f"    {', '.join(state)}, = y"]
+    for k in range(extra):   # (the stages' mechanics are RK4's: its tableau's lines)
+        lines.append(f"    {', '.join(f'{c}_{k}' for c in _EXP_NAMES)} = COEFFICIENTS(-h * LAM{k})")
+    mechanics = [line for line in _stage_lines(RK4, channels, first_given=False)
+                 if "= f(" not in line]
+    outputs = lambda i: ([f"a1_{i}", f"a2_{i}"] + [f"xd{k}_{i}" for k in range(extra)]
+                         + [f"r{j}_{i}" for j in range(channels)])
+    for i in range(4):
+        lines.append(mechanics[i])
+        for k in range(extra):
+            if i == 0:
+                lines.append(f"    e{k}_0 = x{k}")
+            else:
+                exp_name, weights = _EXP_STAGES[i - 1]
+                terms = " + ".join(f"{w}_{k} * n{k}_{j}" for j, w in enumerate(weights) if w)
+                lines.append(f"    e{k}_{i} = {exp_name}_{k} * x{k} + h * ({terms})")
+        arguments = [f"p1_{i}", f"p2_{i}", f"v1_{i}", f"v2_{i}"] + [f"e{k}_{i}" for k in range(extra)]
+        lines.append(f"    {', '.join(outputs(i))}, = f({', '.join(arguments)})")
+        for k in range(extra):      # the nonlinear part N = x' + lam x at the stage
+            lines.append(f"    n{k}_{i} = xd{k}_{i} + LAM{k} * e{k}_{i}")
+    final = [_combination(x, w, terms)
+             for w, x, terms in _final(RK4, channels, RK4.pos_b, RK4.b, extra)]
+    for k in range(extra):
+        final[4 + k] = (f"E1_{k} * x{k} + h * (B1_{k} * n{k}_0 + B2_{k} * n{k}_1 "
+                        f"+ B3_{k} * n{k}_2 + B4_{k} * n{k}_3)")
+    lines.append(f"    return ({', '.join(final)},)")
+    return "\n".join(lines) + "\n"
+
+
+def integrates_decay_exactly(tableau: ButcherTableau) -> bool:
+    """Whether the step of `tableau` integrates the extra states' linear decays exactly
+    (the exponential RK4); other methods step them like the rest (and sub-step for them)."""
+    return tableau is EXPONENTIAL_RK4
+
+
+def step_for(tableau: ButcherTableau, channels: int = 0, decay=(), **tolerances):
+    """The step of `tableau` for a state with the extra states' linear `decay` rates."""
+    if integrates_decay_exactly(tableau) and any(decay):
+        return compile_exponential_step(channels, decay)
+    return compile_step(tableau, channels, extra=len(decay), **tolerances)
+
+
+def compile_exponential_step(channels: int, decay):
+    """step(f, y, h) as compile_step(RK4 ...), with the extra states x_k whose rates
+    f returns integrated exponentially at their linear decay rates `decay` (1/s, >= 0)."""
+    source = exponential_step_source(channels, len(decay))
+    namespace = {f"LAM{k}": float(lam) for k, lam in enumerate(decay)}
+    namespace["COEFFICIENTS"] = lru_cache(maxsize=64)(exponential_rk4)  # h repeats: computed once
+    step = _exec(source, f"<exponential rk4 step, {len(decay)} linear, {channels} channels>",
+                 namespace)["step"]
+    step.source, step.decay = source, tuple(decay)
+    step.constants = {k: v for k, v in namespace.items() if k.startswith("LAM")}
     return step

@@ -48,16 +48,26 @@ class Shadow:
 
     def follow(self, advance, f, y, y1, h, twin=None) -> None:
         """After the motion's step y -> y1: the shadow's step (by `advance`)."""
-        if self.local is None or self.lost:   # no estimate yet: the shadow is the motion
-            return
-        n = self.states
-        if y is not self.last:        # reset, or a state set from outside: same offset
-            offset = self.offset or [0.0] * n
-            self.shadow = (*(a - e for a, e in zip(y[:n], offset)), *y[n:])
         if sum(y1[:4]) - sum(y1[:4]) != 0.0:   # the motion's step is refused: no shadow
             return
-        z1 = advance(f, self.shadow, h)
-        z1 = (*(a - e for a, e in zip(z1[:n], self.local)), *z1[n:])
+        z = self.start(y)
+        if z is not None:
+            self.land(advance(f, z, h), y1, 1, twin)
+
+    def start(self, y):
+        """The shadow's state beside the motion's y, to step from (None: not followed)."""
+        if self.local is None or self.lost:   # no estimate yet: the shadow is the motion
+            return None
+        if y is not self.last:        # reset, or a state set from outside: same offset
+            n, offset = self.states, self.offset or [0.0] * self.states
+            self.shadow = (*(a - e for a, e in zip(y[:n], offset)), *y[n:])
+        return self.shadow
+
+    def land(self, z1, y1, steps: int = 1, twin=None) -> None:
+        """The shadow stepped `steps` steps to z1, less their local errors (over a few steps
+        the motion carries a correction almost unchanged), beside the motion's y1."""
+        n = self.states
+        z1 = (*(a - steps * e for a, e in zip(z1[:n], self.local)), *z1[n:])
         if twin is not None:
             twin.last = z1            # its mode goes on from the corrected state
         offset = [a - b for a, b in zip(y1[:n], z1[:n])]
@@ -68,6 +78,14 @@ class Shadow:
             self.lost, distance = True, max(self.largest, LOST)
         self.largest = max(self.largest, distance)
         self.shadow, self.offset, self.last = z1, offset, y1
+
+
+    def jump(self, z1, y1, largest: float, lost: bool) -> None:
+        """The shadow after a compiled run of steps (compiled.py: the same steps): at z1
+        (corrected) beside the motion's y1, the largest distance on the way, lost or not."""
+        n = self.states
+        self.shadow, self.offset, self.last = z1, [a - b for a, b in zip(y1[:n], z1[:n])], y1
+        self.largest, self.lost = largest, self.lost or lost
 
 
 class Twin:

@@ -16,10 +16,10 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from math import isfinite, nan
 
-from . import accuracy, guard, model, stability
+from . import accuracy, compiled, guard, model, stability
 from .events import switching as switching_for
 from .dynamics import build_dynamics
-from .integrators import INTEGRATORS, compile_step
+from .integrators import INTEGRATORS, step_for
 from .scene import Scene
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
@@ -91,8 +91,8 @@ class Simulator:
         self.extra = self.dynamics.extra
         self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
         self._rhs = self.dynamics.function
-        self._step = compile_step(self._tableau, len(self.channels), rtol=scene.rtol,
-                                  atol=scene.atol, extra=len(self.extra))
+        self._step = step_for(self._tableau, len(self.channels), self.dynamics.decay,
+                              rtol=scene.rtol, atol=scene.atol)
         first = 4 + len(self.extra)
         kinds = self.dynamics.channel_kinds
         self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
@@ -102,10 +102,7 @@ class Simulator:
         if message:
             self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
-        self.switching = switching_for(      # friction, limits, clamps: events.py
-            self.dynamics, self._tableau, self._step, self.substeps, self._emit,
-            lambda: self.time, getattr(self, "switch_events", None))
-        self.accuracy = books_for(self, scene)   # the planned step, its error checked
+        steppers(self, scene)   # switches located, compiled steps, error books
 
     def reset(self) -> None:
         s = self.scene
@@ -262,25 +259,38 @@ class Simulator:
 
     def run(self, duration: float, on_step=None) -> float:
         """Advance by `duration` (whole steps); return the largest |residual| at any step."""
-        steps = self.scene.steps_for(duration, self.step_size)
-        largest = 0.0
-        for _ in range(steps):
-            self.step()
-            largest = max(largest, abs(self.residual()))
-            if on_step is not None:
-                on_step(self)
+        left = steps = self.scene.steps_for(duration, self.step_size)
+        largest, fast = 0.0, on_step is None and self.kernel is not None   # no callback
+        while left:
+            taken, largest = self.kernel.run(self, left, largest) if fast else (1, largest)
+            if not fast:
+                self.step()
+                largest = max(largest, abs(self.residual()))
+                if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
+            left -= taken
         if steps and not self.holding:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest
 
 
-def books_for(sim: Simulator, scene: Scene):
-    """The error books (accuracy.py) of the simulator's step, with the shadow's own
-    switching stepper where the scene switches (it says nothing: its switches are not the
-    run's)."""
-    twin = sim.switching and switching_for(sim.dynamics, sim._tableau, sim._step, sim.substeps,
+def steppers(sim: Simulator, scene: Scene) -> None:
+    """What steps the simulator: the switching stepper (friction, limits, clamps: events.py),
+    the compiled step and runs (compiled.py, extra `fast`), and the error books."""
+    step = compiled.steps_for(sim.dynamics, sim._step)
+    sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
+                                  lambda: sim.time, getattr(sim, "switch_events", None))
+    sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
+    sim.path = getattr(step, "path", "python")
+    sim.accuracy = books_for(sim, scene, step)   # the planned step, its error checked
+
+
+def books_for(sim: Simulator, scene: Scene, step):
+    """The error books (accuracy.py) of `step` (the simulator's, compiled where it can be),
+    with the shadow's own switching stepper where the scene switches (it says nothing: its
+    switches are not the run's)."""
+    twin = sim.switching and switching_for(sim.dynamics, sim._tableau, step, sim.substeps,
                                            lambda kind, message: None, lambda: 0.0)
-    return accuracy.plan(sim._tableau, sim._step, sim.substeps, scene.tolerance, 4, sim._emit,
+    return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
                          int(scene.max_substeps), 4 + len(sim.extra), twin)
 

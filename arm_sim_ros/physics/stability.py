@@ -24,7 +24,7 @@ from fractions import Fraction
 from functools import lru_cache
 from math import ceil, cos, hypot, pi, sin
 
-from .integrators import RK4, ButcherTableau
+from .integrators import RK4, ButcherTableau, exponential_rk4, integrates_decay_exactly
 from .model import ArmParameters, mass_matrix
 
 # Sub-steps aim at this fraction of the limit, d h_sub Lambda = 1.0: there R(-1) = 0.375 is
@@ -118,13 +118,21 @@ def worst_stiffness(arm: ArmParameters) -> float:
     return max(stiffness(arm, 0.0), stiffness(arm, pi))
 
 
-def bound(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
+def _exact(exact: bool, effect) -> bool:
+    """The effect's extra states decay linearly and the step integrates that exactly."""
+    return exact and any(getattr(effect, "linear_decay", tuple)())
+
+
+def bound(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, exact=None):
     """(ratio, limit, what): h times the effects' largest eigenvalue magnitude at any pose,
     and the tableau's limit for it. Damping alone has real eigenvalues (the real-axis
     limit); springs and windings oscillate, so their bound |lambda| is kept inside the
-    half-disk."""
-    decay = sum(e.stiffness(arm) for e in effects)
-    oscillation = sum(e.frequency(arm) for e in effects)
+    half-disk. Windings integrated exactly (exponential RK4) add only their braking here;
+    the rest of their coupling is exact_substeps' business."""
+    exact = integrates_decay_exactly(tableau) if exact is None else exact
+    given = {id(e): {"exact": True} if _exact(exact, e) else {} for e in effects}
+    decay = sum(e.stiffness(arm, **given[id(e)]) for e in effects)
+    oscillation = sum(e.frequency(arm, **given[id(e)]) for e in effects)
     disk = half_disk_limit(tableau) if oscillation else 0.0
     if oscillation and disk > 0.1:     # (Euler's half-disk is empty: nothing to plan)
         return h * (decay + oscillation), disk, "h |lambda|max"
@@ -161,14 +169,63 @@ def substepping(step, substeps: int):
     return advance
 
 
+def exponential_radius(x: float, p: float, d: float) -> float:
+    """Spectral radius of one exponential RK4 step (h = 1) of the winding's linear test
+    problem i' = -x i - sqrt(p) u, u' = sqrt(p) i - d u: the pole x exact, the coupling
+    (winding <-> inertia, squared frequency p) and the other decays d explicit."""
+    e2, e, a21, a31, a32, a41, a43, b1, b2, b3, b4 = exponential_rk4(-x)
+    w = p ** 0.5
+    columns = []
+    for i0, u0 in ((1.0, 0.0), (0.0, 1.0)):
+        n = [(-w * u0, w * i0 - d * u0)]                  # (N, u') of each stage
+        for i_k, u_k in ((e2 * i0, u0), (e2 * i0, u0), (e * i0, u0)):
+            k = len(n)
+            i_k += (a21 * n[0][0] if k == 1 else a31 * n[0][0] + a32 * n[1][0] if k == 2
+                    else a41 * n[0][0] + a43 * n[2][0])
+            u_k += 0.5 * n[k - 1][1] if k < 3 else n[2][1]
+            n.append((-w * u_k, w * i_k - d * u_k))
+        columns.append((e * i0 + b1 * n[0][0] + b2 * n[1][0] + b3 * n[2][0] + b4 * n[3][0],
+                        u0 + (n[0][1] + 2.0 * n[1][1] + 2.0 * n[2][1] + n[3][1]) / 6.0))
+    (m11, m21), (m12, m22) = columns
+    half_trace, det = 0.5 * (m11 + m22), m11 * m22 - m12 * m21
+    disc = half_trace * half_trace - det
+    if disc >= 0.0:
+        return max(abs(half_trace + disc ** 0.5), abs(half_trace - disc ** 0.5))
+    return abs(det) ** 0.5                                # complex pair: |lambda|^2 = det
+
+
+# The coupling's frequency varies with the pose (Lambda between its extremes): checked at
+# these fractions of the worst one too, the region not being convex.
+COUPLING_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.1, 0.01)
+
+
+def exact_substeps(effects, arm: ArmParameters, h: float) -> int:
+    """Sub-steps that keep the exponential step stable on every exactly integrated
+    winding's test problem (1: none), the other effects' real decays included."""
+    windings = [e for e in effects if _exact(True, e) and hasattr(e, "coupling")]
+    if not windings:
+        return 1
+    others = sum(e.stiffness(arm) for e in effects if e not in windings)
+    n = 1
+    while n <= MAX_SUBSTEPS:
+        dt = h / n
+        if all(exponential_radius(dt * lam, dt * dt * p * s, dt * others) <= 1.0 + 1e-12
+               for e in windings for lam, p in e.coupling(arm) for s in COUPLING_FRACTIONS):
+            return n
+        n = n + 1 if n < 64 else ceil(1.25 * n)
+    return MAX_SUBSTEPS + 1
+
+
 def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
     """(ratio, limit, sub-steps, what to tell a person or None): the
     sub-steps that keep the stiff effects stable at every elbow angle (1 = plain steps).
     Damping alone has real eigenvalues (the real-axis limit); springs and windings
     oscillate, so their bound |lambda| is kept inside the half-disk. An adaptive method
     controls its own error and sub-steps by itself."""
-    ratio, limit, what = bound(tableau, effects, arm, h)
-    substeps = 1 if getattr(tableau, "adaptive", False) else substeps_needed(ratio, limit)
+    exact = integrates_decay_exactly(tableau)
+    ratio, limit, what = bound(tableau, effects, arm, h, exact)
+    substeps = 1 if getattr(tableau, "adaptive", False) else max(
+        substeps_needed(ratio, limit), exact_substeps(effects, arm, h) if exact else 1)
     message = None
     if substeps > 1:
         stiff = "+".join(e.name for e in effects if e.stiffness(arm) or e.frequency(arm))

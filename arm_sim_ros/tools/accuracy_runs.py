@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from math import ceil, isfinite
 
 from ..physics import model
-from ..physics.integrators import INTEGRATORS, compile_step
+from ..physics.integrators import INTEGRATORS, step_for
 from ..physics.scene import Scene, SceneError
 from ..physics.simulator import Simulator
 from . import mujoco_peer
@@ -187,7 +187,7 @@ def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, 
         run.tolerance = tolerance
         return run
     sim = Simulator(scene.replace(integrator=name, step_size=step_size))
-    step = compile_step(INTEGRATORS[name], len(sim.channels), extra=len(sim.extra), **tolerances)
+    step = step_for(INTEGRATORS[name], len(sim.channels), sim.dynamics.decay, **tolerances)
     every, total = cadence(scene, times, step_size)
     y0 = sim.state
 

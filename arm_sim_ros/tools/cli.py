@@ -134,7 +134,8 @@ def cmd_run(args) -> int:
                                        # NaN where the steps are not estimated: JSON's null
                                        "error_estimate": sim.error_estimate,
                                        "accumulated_error": sim.accumulated_error,
-                                       "interrupted_at": sim.time if stop.requested else None}
+                                       "interrupted_at": sim.time if stop.requested else None,
+                                       "path": sim.path}   # compiled (numba) or python
     for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
         print(f"arm-sim: {event.kind} at t = {event.t:g} s: {event.message}", file=sys.stderr)
     if stop.requested:

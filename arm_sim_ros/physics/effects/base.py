@@ -166,6 +166,11 @@ class Effect:
         """Expressions of d/dt of its extra states, in `state` order."""
         return []
 
+    def linear_decay(self) -> tuple:
+        """Linear decay rates (1/s) of its extra states, integrated exactly where the method
+        allows (integrators.compile_exponential_step): x' = -rate x + the rest."""
+        return (0.0,) * len(self.state)
+
     def stored_energy(self, arm, q, extra) -> float:
         """Energy it stores at configuration q and its extra states, counted in E."""
         return 0.0

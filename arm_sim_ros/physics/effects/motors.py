@@ -145,18 +145,32 @@ class Motors(Effect):
             return 0.0
         return 0.5 * (self.inductance[0] * extra[0] ** 2 + self.inductance[1] * extra[1] ** 2)
 
-    def stiffness(self, arm) -> float:
+    def linear_decay(self) -> tuple:
+        """R/L of each winding: the currents' linear decay, integrated exactly by the
+        exponential RK4 (integrators.py) where the scene's method is rk4."""
+        return tuple(r / l for r, l in zip(self.resistance, self.inductance)) if self.windings else ()
+
+    def coupling(self, arm) -> tuple:
+        """((R/L, (kN)² Λ / L) per winding): the pole and the squared frequency at which
+        winding and inertia exchange energy, of the linear test problem the stability plan
+        checks the exponential step on (stability.exact_substeps)."""
+        lam = worst_stiffness(arm)
+        return tuple((r / l, (k * n) ** 2 * lam / l) for r, l, k, n in
+                     zip(self.resistance, self.inductance, self.torque_constant, self.gear_ratio))
+
+    def stiffness(self, arm, exact=False) -> float:
         if not self.windings:
             return 0.0
         # The winding's own pole −R/L, plus the electrical braking (kN)²/R it puts on the
-        # joint (what a slow winding becomes: a damper), both real and negative.
-        electrical = max(r / l for r, l in zip(self.resistance, self.inductance))
+        # joint (what a slow winding becomes: a damper), both real and negative. `exact`:
+        # the pole is integrated exactly, the rest is checked by exact_substeps.
+        electrical = 0.0 if exact else max(r / l for r, l in zip(self.resistance, self.inductance))
         braking = max((k * n) ** 2 / r for k, n, r in
                       zip(self.torque_constant, self.gear_ratio, self.resistance))
         return electrical + braking * worst_stiffness(arm)
 
-    def frequency(self, arm) -> float:
-        if not self.windings:
+    def frequency(self, arm, exact=False) -> float:
+        if not self.windings or exact:
             return 0.0
         # Winding and inertia exchange energy: an oscillation at most sqrt((kN)² Λ / L).
         return max(k * n * (worst_stiffness(arm) / l) ** 0.5 for k, n, l in

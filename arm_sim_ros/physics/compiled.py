@@ -1,0 +1,304 @@
+"""The compiled path (extra `fast`: numba): the scene's generated code, compiled.
+
+The right-hand side (dynamics.py) and the step (integrators.py) are plain Python text. Here
+they are written once more into a module file named by the hash of that text, with three
+changes: the command the policies read becomes an argument K (a float array: the command,
+then, for Batch, the constants that vary per arm), f(...) becomes rhs(..., K), and every
+function is numba.njit(cache=True). A loop around them advances k plain steps (the planned
+equal sub-steps each) and keeps the largest |energy balance residual|, as Simulator.run
+does step by step; another advances every arm of a Batch, arms in parallel. A switching
+scene's modes (events.py) each get their rhs compiled with the step when first met.
+
+The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
+and exp from the same libm: the states are the pure-Python path's bit for bit
+(test_compiled.py). numba caches the machine code next to the module file
+(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine.
+Without numba (or with ARM_SIM_COMPILED=0) nothing here is used.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import os
+import re
+import sys
+from pathlib import Path
+
+from . import guard, integrators
+from .kernels import KERNELS
+from .shadow import LOST
+
+try:                      # the optional extra: pip install -e '.[fast]'
+    import numba
+except ImportError:       # pragma: no cover - exercised where numba is absent
+    numba = None
+
+# Energy each effect stores (effects' stored_energy, the same operations in the same order);
+# an effect that stores energy and is not here keeps its scene on the Python path.
+STORED = {
+    "gravity": lambda e, arm: (["gravity", "k1", "k2"], "{0} * ({1} * sin(q1) + {2} * sin(q1 + q2))",
+                               [e.gravity, *arm.gravity_coefficients]),
+    "springs": lambda e, arm: ([], "0.5 * ({0} * (q1 - {1}) ** 2 + {2} * (q2 - {3}) ** 2)",
+                               [e.spring_constants[0], e.rest_positions[0],
+                                e.spring_constants[1], e.rest_positions[1]]),
+    "motors": lambda e, arm: ([], "0.5 * ({0} * x0 ** 2 + {1} * x1 ** 2)" if e.windings
+                              else "0.0", list(e.inductance) if e.windings else []),
+}
+
+
+def _limit_energy(e, arm):
+    """CompliantLimits.stored_energy, term by term (a hard limit stores none)."""
+    if e.hard:
+        return [], "0.0", []
+    total, values = "0.0", [e.spring]
+    for j, (lo, hi) in enumerate(zip(e.lower, e.upper)):
+        over, under = f"(q{j + 1} - {{{len(values)}}})", f"(q{j + 1} - {{{len(values) + 1}}})"
+        values += [hi, lo]
+        total = (f"({total} + 0.5 * ({over} + abs({over})) * 0.5 * ({over} + abs({over}))"
+                 f" + 0.5 * ({under} - abs({under})) * 0.5 * ({under} - abs({under})))")
+    return [], "0.5 * {0} * " + total, values
+
+
+STORED["joint_limits"] = _limit_energy
+STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
+
+
+def available() -> bool:
+    """numba imports, ARM_SIM_COMPILED is not 0 and the cache directory is writable."""
+    if numba is None or os.environ.get("ARM_SIM_COMPILED", "1") == "0":
+        return False
+    try:
+        cache_dir().mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(cache_dir(), os.W_OK)
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("ARM_SIM_CACHE") or Path.home() / ".cache" / "arm_sim_ros")
+
+
+def _signature(width: int) -> str:
+    return ", ".join(f"s{k}" for k in range(width))
+
+
+def _reads(names) -> list[str]:
+    """The lines that read the constants `names` from K (after the command: K[0], K[1])."""
+    return [f"    {name} = K[{2 + j}]" for j, name in enumerate(names)]
+
+
+def rhs_source(source: str, names) -> str:
+    """The generated rhs with the command and the constants `names` read from K."""
+    lines = source.replace("command[0]", "K[0]").replace("command[1]", "K[1]")
+    lines = lines.replace("MIN(", "min(").replace("MAX(", "max(").splitlines()
+    return "\n".join([lines[0].replace("):", ", K):"), *_reads(names), *lines[1:]]) + "\n"
+
+
+def step_source(step, names) -> str:
+    """The generated step with f(...) the module's rhs(..., K), its constants from K."""
+    source = step.source.replace("def step(f, y, h):", "def step(y, h, K):\n"
+                                 + "\n".join(_reads(names)))
+    return re.sub(r"= f\(([^)]*)\)", r"= rhs(\1, K)", source)
+
+
+def energy_source(dynamics):
+    """(source, values): residual(y, K, E0, R0, R1) as Simulator.residual computes it, its
+    constants read from K[2:] in the order of `values`; None where an effect's stored
+    energy has no compiled form."""
+    arm, terms = dynamics.arm, []
+    values = list(arm.mass_constants)
+    for effect in dynamics.active:
+        if effect.name in STORED:
+            _, text, numbers = STORED[effect.name](effect, arm)
+            terms.append(text.format(*(f"EC{len(values) + n}" for n in range(len(numbers)))))
+            values += numbers
+        elif effect.name not in STORELESS:
+            return None
+    width = 4 + len(dynamics.extra) + len(dynamics.channels)
+    first = 4 + len(dynamics.extra)
+    inputs = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "input"]
+    losses = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "loss"]
+    extra = "".join(f"    x{k} = s{4 + k}\n" for k in range(len(dynamics.extra)))
+    reads = "".join(f"    EC{n} = K[{2 + n}]\n" for n in range(len(values)))
+    stored = "0.0" + "".join(f" + {t}" for t in terms)
+    return (f"def residual(y, K, E0, R0, R1):\n    {_signature(width)}, = y\n{reads}"
+            f"    q1, q2, u1, u2 = s0, s1, s2, s3\n{extra}"
+            f"    c2 = cos(q2)\n    m11 = EC0 + 2.0 * EC1 * c2\n    m12 = EC2 + EC1 * c2\n"
+            f"    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + EC3 * u2 * u2)\n"
+            f"    stored = {stored}\n"
+            f"    work = R0{''.join(' + ' + s for s in inputs)}\n"
+            f"    lost = R1{''.join(' + ' + s for s in losses)}\n"
+            f"    return 0.0 + kinetic + stored - E0 - work + lost\n"), values
+
+
+def module_source(dynamics, step, rhs=None):
+    """(source, constant names): the module of rhs (the scene's, or a mode's `rhs` source),
+    step, residual and the kernels, all njit. Constants are read from K (constants_of),
+    not written in: the source, and so the compiled code, depends on the scene's structure
+    only, not on its parameter values (a parameter sweep compiles once)."""
+    rhs = dynamics.source if rhs is None else rhs
+    values = {**dynamics.function.__globals__, **getattr(step, "constants", {})}
+    found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source))
+    names = sorted(n for n in found if n in values and isinstance(values[n], (int, float))
+                   and not isinstance(values[n], bool))
+    lines = ["from math import cos, sin, exp, isfinite", "from numba import njit, prange", ""]
+    if "COEFFICIENTS" in step.source:    # the exponential step's coefficients, compiled too
+        lines += [f"PHI_SERIES = {integrators.PHI_SERIES!r}",
+                  "@njit(cache=True)\n" + inspect.getsource(integrators.phi),
+                  "@njit(cache=True)\n" + inspect.getsource(integrators.exponential_rk4),
+                  "COEFFICIENTS = exponential_rk4"]
+    width = 4 + len(dynamics.extra) + len(dynamics.channels)
+    energy = energy_source(dynamics)
+    residual = energy[0] if energy else "def residual(y, K, E0, R0, R1):\n    return 0.0\n"
+    for function in (rhs_source(rhs, names), step_source(step, names), residual):
+        lines += ["@njit(cache=True)", function]
+    lines.append(KERNELS.format(items=", ".join(f"y[{k}]" for k in range(width)),
+                                zitems=", ".join(f"z[{k}]" for k in range(width)),
+                                columns=", ".join(f"Y[{k}, a]" for k in range(width)),
+                                width=width))
+    return "\n".join(lines) + "\n", names
+
+
+def constants_of(names, values, command=(0.0, 0.0)):
+    """K: the command, then the constants `names` (floats; Batch: per-arm arrays too)."""
+    import numpy as np
+    return np.array([command[0], command[1], *(values[n] for n in names)], dtype=float)
+
+
+def load(source: str):
+    """The module of `source`, written once to the cache directory under its hash."""
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    name = f"arm_sim_kernel_{digest}"
+    if name in sys.modules:
+        return sys.modules[name]
+    directory = cache_dir()
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{name}.py"
+    if not path.is_file() or path.read_text() != source:
+        temporary = path.with_suffix(f".{os.getpid()}.tmp")
+        temporary.write_text(source)
+        os.replace(temporary, path)        # atomic: two processes may write it at once
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+class Kernel:
+    """A simulator's compiled runs of plain steps and its compiled energy residual
+    (Simulator.run without a per-step callback calls `run`)."""
+
+    path = "compiled (numba)"
+
+    def __init__(self, dynamics, step, plain: bool):
+        import numpy as np
+        self.plain = plain        # runs of plain steps (no switches, no driver check)
+        source, names = module_source(dynamics, step)
+        self.module = load(source)
+        self.K = constants_of(names, {**dynamics.function.__globals__,
+                                      **getattr(step, "constants", {})})
+        self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
+        self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
+        self.z, self.L = np.zeros(len(self.y)), np.zeros(len(self.y))
+        self.command = dynamics.command
+
+    def run(self, sim, left: int, largest: float):
+        """(steps taken, largest |residual|) of Simulator.run without a callback: plain
+        steps in one call, up to the accuracy books' next check (`due`) and the next
+        divergence check; else (a check due, a switching scene, diverged, a step that would
+        not be finite) one Simulator.step, its residual compiled."""
+        books = sim.accuracy
+        if self.plain and not sim.diverged and sim.steps < books.due:
+            count = min(left, books.due - sim.steps,
+                        guard.CHECK_EVERY - sim.steps % guard.CHECK_EVERY)
+            done, largest = self.advance(sim, count, books.substeps, largest)
+            sim.steps += done
+            if done and sim.steps % guard.CHECK_EVERY == 0:
+                sim._check_divergence()
+            if done:
+                return done, largest
+        sim.step()
+        self.y[:] = sim.state
+        residual = self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
+        return 1, max(largest, abs(residual))
+
+    def advance(self, sim, steps: int, substeps: int, largest: float):
+        """(steps taken, largest |residual| so far) from sim.state; sim.state updated."""
+        self.K[0], self.K[1] = self.command
+        y, before = self.y, sim.state
+        y[:] = before
+        shadow = getattr(sim.accuracy, "shadow", None)
+        z = shadow.start(before) if shadow is not None else None
+        if z is None:
+            done, largest = self.module.advance(y, sim.step_size, steps, substeps, self.K,
+                                                self.C, sim.initial_energy, *sim.retired, largest)
+            sim.state = tuple(y.tolist())
+            return done, largest
+        self.z[:] = z            # the shadow beside it, step for step (shadow.py)
+        self.L[:shadow.states] = shadow.local
+        done, largest, far, gone = self.module.advance_shadowed(
+            y, self.z, self.L, shadow.states, sim.step_size, steps, substeps, self.K, self.C,
+            sim.initial_energy, *sim.retired, largest, shadow.largest, LOST)
+        sim.state = tuple(y.tolist())
+        if done:
+            shadow.jump(tuple(self.z.tolist()), sim.state, far, gone)
+        return done, largest
+
+
+class Steps:
+    """step(f, y, h) compiled for each right-hand side f it is given: the scene's, and each
+    mode's of a switching scene (events.py steps them; dynamics.mode_functions gives their
+    source), compiled when first met, the command read at each call."""
+
+    path = "compiled (numba)"
+
+    def __init__(self, dynamics, step):
+        import numpy as np
+        self.dynamics, self.python = dynamics, step
+        self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
+        self.command, self.compiled = dynamics.command, {}
+
+    def __call__(self, f, y, h):
+        known = self.compiled.get(f)
+        if known is None:
+            known = self.compiled[f] = self.compile(f)
+        step, K = known
+        K[0], K[1] = self.command
+        self.y[:] = y
+        return step(self.y, h, K)
+
+    def compile(self, f):
+        """(step_array, K) of the module of rhs f; a function without source: Python's."""
+        source = None if f is self.dynamics.function else getattr(f, "source", None)
+        if source is None and f is not self.dynamics.function:
+            return (lambda y, h, K: self.python(f, tuple(y), h)), [0.0, 0.0]
+        text, names = module_source(self.dynamics, self.python, rhs=source)
+        values = {**self.dynamics.function.__globals__, **getattr(self.python, "constants", {})}
+        return load(text).step_array, constants_of(names, values)
+
+
+def compilable(dynamics, step) -> bool:
+    """numba on, a fixed step, and every constant the rhs reads a number (a servo's
+    set-points are a list the node changes: Python's path)."""
+    values = dynamics.function.__globals__
+    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source))
+    return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
+            and all(isinstance(values.get(n, 0.0), (int, float)) for n in names))
+
+
+def steps_for(dynamics, step):
+    """The compiled Steps of a fixed-step scene, or `step` itself (no numba, adaptive)."""
+    if not compilable(dynamics, step):
+        return step
+    return Steps(dynamics, step)
+
+
+def kernel_for(dynamics, step, stepped_elsewhere=None):
+    """The compiled kernel of a scene, or None (no numba, ARM_SIM_COMPILED=0, an adaptive
+    step, or an effect whose stored energy has no compiled form); `stepped_elsewhere`
+    (switches located, a driver checked step by step): its residual only."""
+    if not compilable(dynamics, step) or energy_source(dynamics) is None:
+        return None
+    return Kernel(dynamics, step, stepped_elsewhere is None)

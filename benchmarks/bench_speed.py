@@ -1,0 +1,230 @@
+"""Where the time goes: Simulator.run per preset, pure Python against compiled (extra `fast`),
+beside MuJoCo 4.0's RK4 on the same scene and the compiled limit; Batch against
+mujoco.rollout; and the windings integrated exactly (exponential_rk4) against rk4's
+sub-steps and MuJoCo's first-order dcmotor at equal step size.
+
+Columns (µs per simulated second, and steps per second):
+  python     Simulator.run with ARM_SIM_COMPILED=0 (today's path), default tolerance
+  compiled   Simulator.run on the compiled path (compiled.py), the same steps bit for bit:
+             runs of plain steps in one call; switching scenes (events.py) step each mode's
+             compiled step from Python
+  mujoco     mj_step in a Python loop, RK4, the scene built by tools/mujoco_peer (only where
+             it models the same physics: no soft friction or limits, no controller model)
+  limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
+             no accuracy checks, no residual, no switching: friction's mode-free form)
+Each keeps the fastest of --repeat runs of --seconds simulated seconds after one warm-up run
+(`first`: that run, compiling what it meets or loading it from the cache).
+
+    pip install -e '.[bench,fast]'
+    nice python benchmarks/bench_speed.py [--seconds 2] [--repeat 3] [--arms 20000]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from arm_sim_ros.physics import compiled  # noqa: E402
+from arm_sim_ros.physics.batch import Batch  # noqa: E402
+from arm_sim_ros.physics.dynamics import build_dynamics  # noqa: E402
+from arm_sim_ros.physics.scene import load_scene, preset_names  # noqa: E402
+from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
+from arm_sim_ros.tools import mujoco_peer  # noqa: E402
+
+
+def fastest(run, repeat: int) -> float:
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def simulator(scene, fast: bool) -> Simulator:
+    os.environ["ARM_SIM_COMPILED"] = "1" if fast else "0"
+    try:
+        return Simulator(scene)
+    finally:
+        os.environ.pop("ARM_SIM_COMPILED")
+
+
+def time_run(scene, seconds: float, repeat: int, fast: bool):
+    """(seconds of wall time for `seconds` simulated, path, first-call seconds)."""
+    sim = simulator(scene, fast)
+    start = time.perf_counter()
+    sim.run(seconds)       # compiles (or loads from the cache) every mode the run meets
+    first = time.perf_counter() - start
+
+    def run():
+        sim.reset()
+        sim.run(seconds)
+    return fastest(run, repeat), sim.path, first
+
+
+def time_limit(scene, seconds: float, repeat: int) -> float:
+    """The bare compiled RK4 loop on the scene's rhs (compiled.bare: steps, nothing else)."""
+    sim = simulator(scene, False)
+    dynamics = build_dynamics(scene)
+    source, names = compiled.module_source(dynamics, sim._step)
+    module = compiled.load(source)
+    command = compiled.constants_of(names, {**dynamics.function.__globals__,
+                                            **getattr(sim._step, "constants", {})})
+    y0 = np.array(sim.state, dtype=float)
+    steps = scene.steps_for(seconds) * sim.substeps
+    h = scene.step_size / sim.substeps
+    module.bare(y0.copy(), h, 1, command)
+    return fastest(lambda: module.bare(y0.copy(), h, steps, command), repeat)
+
+
+def time_mujoco(scene, seconds: float, repeat: int):
+    """Wall seconds of mj_step RK4 for `seconds`, or (None, why not)."""
+    import mujoco
+    if scene.friction is not None or scene.joint_limits is not None:
+        return None, "soft friction/limits"
+    try:
+        model, ctrl = mujoco_peer.mujoco_model(scene, "RK4")
+    except mujoco_peer.Unsupported as error:
+        return None, str(error).split(" (")[0][:22]
+    data = mujoco_peer.mujoco_data(model, scene, ctrl)
+    steps, step = scene.steps_for(seconds), mujoco.mj_step
+
+    def run():
+        mujoco_peer.reset(model, data, scene, ctrl)
+        for _ in range(steps):
+            step(model, data)
+    return fastest(run, repeat), ""
+
+
+def presets_table(seconds: float, repeat: int) -> list[str]:
+    head = (f"{'preset':<30}{'h':>7}{'sub':>4} {'python':>9} {'compiled':>9} {'mujoco':>9} "
+            f"{'limit':>8} {'speed-up':>8} {'of limit':>8}  path / first compile")
+    lines = [f"µs per simulated second (steps/s below each), {seconds:g} s runs, best of {repeat}",
+             head, "-" * len(head)]
+    for name in preset_names():
+        scene = load_scene(name)
+        py, _, _ = time_run(scene, seconds, repeat, False)
+        fast, path, first = time_run(scene, seconds, repeat, True)
+        limit = time_limit(scene, seconds, repeat)
+        theirs, why = time_mujoco(scene, seconds, repeat)
+        steps = scene.steps_for(seconds)
+        per = lambda t: f"{t / seconds * 1e6:>9.0f}" if t is not None else f"{'-':>9}"
+        rate = lambda t: f"{steps / t:>9.3g}" if t is not None else f"{'':>9}"
+        sub = Simulator(scene).substeps
+        lines.append(f"{name:<30}{scene.step_size:>7g}{sub:>4} {per(py)} {per(fast)} {per(theirs)}"
+                     f"{per(limit)[1:]} {py / fast:>7.1f}x {fast / limit:>7.1f}x  "
+                     f"{'compiled' if 'numba' in path else 'python'} {first:.2f} s {why}")
+        lines.append(f"{'':<41} {rate(py)} {rate(fast)} {rate(theirs)}{rate(limit)[1:]}")
+    return lines
+
+
+def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
+    """Batch (numpy, compiled on 1 and 2 threads) against mujoco.rollout, effect-free."""
+    import mujoco
+    from mujoco import rollout
+
+    scene = load_scene("release").replace(tolerance=0.0)
+    rng = np.random.default_rng(0)
+    positions = np.asarray(scene.initial_positions) + rng.uniform(-0.5, 0.5, (arms, 2))
+    lines = [f"Batch, {arms} arms x {steps} steps of release (h = {scene.step_size:g} s), "
+             f"best of {repeat}: M arm-steps/s", "-" * 60]
+    for label, fast, threads in (("numpy (today)", False, 1), ("numpy, 2 threads", False, 2),
+                                 ("compiled, 1 thread", True, 1), ("compiled, 2 threads", True, 2)):
+        os.environ["ARM_SIM_COMPILED"] = "1" if fast else "0"
+        batch = Batch(scene, positions)
+        os.environ.pop("ARM_SIM_COMPILED")
+        batch.run(0, threads)
+
+        def run():
+            batch.reset()
+            batch.run(steps, threads)
+        lines.append(f"{label:<28}{arms * steps / fastest(run, repeat) / 1e6:>8.2f}")
+    model, ctrl = mujoco_peer.mujoco_model(scene, "RK4")
+    datas = [mujoco.MjData(model) for _ in range(2)]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    initial = np.zeros((arms, mujoco.mj_stateSize(model, spec)))
+    for i in range(arms):
+        mujoco_peer.reset(model, datas[0], scene, ctrl)
+        datas[0].qpos[:] = positions[i]
+        mujoco.mj_getState(model, datas[0], initial[i], spec)
+    for threads in (1, 2):
+        with rollout.Rollout(nthread=threads) as pool:
+            pool.rollout(model, datas[:threads], initial, nstep=steps)
+            elapsed = fastest(lambda: pool.rollout(model, datas[:threads], initial, nstep=steps),
+                              repeat)
+        lines.append(f"{f'mujoco.rollout, {threads} thread(s)':<28}{arms * steps / elapsed / 1e6:>8.2f}")
+    return lines
+
+
+def windings_table(repeat: int) -> list[str]:
+    """|q - DOP853 reference| and cost at equal h: rk4 (sub-steps), exponential_rk4 (none),
+    MuJoCo's dcmotor (RK4, first-order current update). Tolerance off: the methods alone."""
+    import mujoco
+    from bench_effects import WINDINGS, windings_reference
+
+    seconds = 0.2
+    scene = load_scene("release").replace(motors=WINDINGS, policy="constant",
+                                          constant_torque=(20.0, 5.0), tolerance=0.0)
+    reference = windings_reference(scene, seconds)
+    lines = [f"windings (maxon, L/R = 0.53 ms; constant 20, 5 N m): max |q - reference| at "
+             f"t = {seconds:g} s and µs per simulated second (python path, tolerance off)",
+             f"{'h (ms)':>7} | {'rk4 sub':>7} {'error':>8} {'µs/s':>8} | {'exp sub':>7} "
+             f"{'error':>8} {'order':>5} {'µs/s':>8} | {'dcmotor error':>13} {'µs/s':>8}",
+             "-" * 96]
+    previous = None
+    for h in (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4):
+        row = [f"{h * 1e3:>7g} |"]
+        for integrator in ("rk4", "exponential_rk4"):
+            at = scene.replace(step_size=h, integrator=integrator)
+            sim = simulator(at, False)
+            elapsed = fastest(lambda: (sim.reset(), sim.run(seconds)), repeat)
+            error = max(abs(sim.state[i] - reference[i]) for i in (0, 1))
+            order = (f"{math.log2(previous / error):>5.1f}" if integrator != "rk4" and previous
+                     else f"{'':>5}" if integrator != "rk4" else "")
+            if integrator != "rk4":
+                previous = error
+            row.append(f"{sim.substeps:>7d} {error:>8.1e} {order}{' ' if order else ''}"
+                       f"{elapsed / seconds * 1e6:>8.0f} |")
+        at = scene.replace(step_size=h)
+        model, ctrl = mujoco_peer.mujoco_model(at, "RK4")
+        data = mujoco_peer.mujoco_data(model, at, ctrl)
+
+        def run():
+            mujoco_peer.reset(model, data, at, ctrl)
+            for _ in range(at.steps_for(seconds)):
+                mujoco.mj_step(model, data)
+        elapsed = fastest(run, repeat)
+        error = max(abs(data.qpos[i] - reference[i]) for i in (0, 1))
+        row.append(f" {error:>13.1e} {elapsed / seconds * 1e6:>8.0f}")
+        lines.append(" ".join(row))
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=2.0)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--arms", type=int, default=20000)
+    parser.add_argument("--batch-steps", type=int, default=500)
+    args = parser.parse_args()
+    if not compiled.available():
+        sys.exit("bench_speed: numba is not installed: pip install -e '.[fast]'")
+    import mujoco
+    import numba
+    print(f"numba {numba.__version__}, mujoco {mujoco.__version__}, numpy {np.__version__}, "
+          f"{os.cpu_count()} CPUs")
+    for table in (presets_table(args.seconds, args.repeat),
+                  batch_table(args.arms, args.batch_steps, args.repeat),
+                  windings_table(args.repeat)):
+        print("\n".join(table) + "\n", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,98 @@
+"""The compiled path (extra `fast`, numba) takes the same steps as the pure-Python path,
+bit for bit: states, energy books, error books, the largest residual. Skipped without numba.
+"""
+import hashlib
+import math
+from pathlib import Path
+
+import pytest
+
+from arm_sim_ros.physics import compiled
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+
+pytest.importorskip("numba")
+
+SCENES = {
+    "release": load_scene("release"),
+    "springs_oscillation": load_scene("springs_oscillation"),
+    "moving_gravity_compensation": load_scene("moving_gravity_compensation"),
+    "windings_exponential": load_scene("motor_windings_hold").replace(
+        integrator="exponential_rk4", initial_velocities=(1.0, -2.0)),
+    "payload_damping_command": load_scene("payload_release").replace(
+        damping=(0.3, 0.1), policy="command_gravity_compensation"),
+}
+
+
+def python_and_compiled(scene, monkeypatch):
+    monkeypatch.setenv("ARM_SIM_COMPILED", "0")
+    python = Simulator(scene)
+    monkeypatch.setenv("ARM_SIM_COMPILED", "1")
+    return python, Simulator(scene)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_compiled_run_equals_python_run_bit_for_bit(name, monkeypatch):
+    python, fast = python_and_compiled(SCENES[name], monkeypatch)
+    assert (python.path, fast.path) == ("python", "compiled (numba)")
+    for sim in (python, fast):
+        sim.set_command(0.7, -0.4)
+    for duration in (0.37, 1.0):          # runs that end between checks, then go on
+        assert python.run(duration) == fast.run(duration)
+        assert python.state == fast.state
+        assert python.steps == fast.steps
+        assert python.accumulated_error == fast.accumulated_error      # the shadow's too
+        assert python.error_estimate == fast.error_estimate
+        assert python.substeps_taken == fast.substeps_taken
+
+
+def test_a_run_with_a_per_step_callback_sees_every_step_and_ends_in_the_same_state(monkeypatch):
+    python, fast = python_and_compiled(SCENES["release"], monkeypatch)
+    seen = []
+    fast.run(0.2, lambda s: seen.append(s.steps))
+    python.run(0.2)
+    assert seen == list(range(1, 21)) and fast.state == python.state
+
+
+def test_a_step_that_would_not_be_finite_is_refused_as_on_the_python_path(monkeypatch):
+    scene = load_scene("release").replace(initial_velocities=(1e154, 1e154), tolerance=0.0)
+    python, fast = python_and_compiled(scene, monkeypatch)
+    python.run(0.1)
+    fast.run(0.1)
+    assert fast.fault == python.fault and fast.fault is not None
+    assert fast.state == python.state and fast.refused_steps == python.refused_steps
+
+
+@pytest.mark.parametrize("name, seconds", [("stick_slip", 1.5), ("geared_arm", 0.1)])
+def test_switching_scenes_step_each_modes_compiled_step_bit_for_bit(name, seconds, monkeypatch):
+    python, fast = python_and_compiled(load_scene(name), monkeypatch)
+    for sim in (python, fast):
+        sim.set_command(2.0, -1.0)
+    assert python.run(seconds) == fast.run(seconds)
+    assert python.state == fast.state and python.switch_events == fast.switch_events
+    assert sum(python.switch_events.values()) > 0
+    assert python.accumulated_error == fast.accumulated_error
+
+
+def test_adaptive_steps_stay_on_the_python_path():
+    assert Simulator(load_scene("release").replace(integrator="dopri5")).path == "python"
+
+
+def test_without_it_nothing_is_compiled(monkeypatch):
+    monkeypatch.setenv("ARM_SIM_COMPILED", "0")
+    assert not compiled.available()
+    assert Simulator(load_scene("release")).kernel is None
+
+
+def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure():
+    """Parameter values are read at run time: a sweep over them compiles once."""
+    sims = [Simulator(load_scene("damped_release").replace(damping=d, link_masses=(1.0, m)))
+            for d, m in ((0.123, 1.0), (0.7, 2.5))]
+    for sim in sims:
+        sim.run(0.5)
+    module = sims[0].kernel.module
+    assert sims[1].kernel.module is module and sims[0].state != sims[1].state
+    source, _ = compiled.module_source(sims[1].dynamics, sims[1]._step)
+    path = Path(module.__file__)
+    assert path.name == f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}.py"
+    assert path.read_text() == source and math.isfinite(sims[1].state[0])
