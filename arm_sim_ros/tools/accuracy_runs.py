@@ -10,10 +10,13 @@ from dataclasses import dataclass
 from math import ceil, isfinite
 
 from ..physics import model
+from ..physics.accuracy import MAX_SUBSTEPS
 from ..physics.integrators import INTEGRATORS, step_for
 from ..physics.scene import Scene, SceneError
 from ..physics.simulator import Simulator
 from . import mujoco_peer
+from .independent import TOLERANCE as INDEPENDENT_TOLERANCE
+from .independent import Independent, covers
 
 REFERENCE_TOLERANCE = 1e-13
 MODEL_EFFECTS = {"gravity", "damping", "actuator"}    # what model.forward_dynamics covers
@@ -60,6 +63,10 @@ def reference(scene: Scene, times) -> list[tuple]:
 
 def reference_and_label(scene: Scene, times) -> tuple[list[tuple], str]:
     if switches(scene):
+        if covers(scene) is None:         # friction and limits on separately written equations
+            return (Independent(scene).states(times),
+                    "scipy DOP853, switches as terminal events and restarts, on equations "
+                    f"written apart (tools/independent.py), rtol=atol={INDEPENDENT_TOLERANCE:g}")
         return hybrid_reference(scene, times)
     import numpy as np
     from scipy.integrate import solve_ivp
@@ -94,14 +101,17 @@ def reference_and_label(scene: Scene, times) -> tuple[list[tuple], str]:
 
 
 def hybrid_reference(scene: Scene, times) -> tuple[list[tuple], str]:
-    """Our rk4 at a fine step with every switch located (order 4 across switches,
-    test/test_friction_limits.py), checked against itself at half the step (the label says
-    how far apart the two are)."""
+    """For a switching scene tools/independent.py does not cover (motors, clamps): our rk4
+    at a fine step with every switch located (order 4 across switches,
+    test/test_friction_limits.py) and a tolerance at rounding, so contacts are resolved as
+    finely as the rest (at tolerance 0 a compliant contact's sub-step is fixed, whatever h:
+    a plateau), checked against itself at half the step (the label says how far apart)."""
     interval = times[1] - times[0] if len(times) > 1 else 0.0
     h = interval / ceil(interval / HYBRID_STEP - 1e-9) if interval else scene.step_size
     runs = []
     for step in (h, h / 2):
-        sim = Simulator(scene.replace(integrator="rk4", step_size=step, tolerance=0.0))
+        sim = Simulator(scene.replace(integrator="rk4", step_size=step, tolerance=1e-10,
+                                      max_substeps=MAX_SUBSTEPS))
         runs.append(stepped(sim, len(times) - 1, round(interval / step) if interval else 1,
                             books=False)[0])
     gap = max(abs(a - b) for s, r in zip(*runs) for a, b in zip(s[:4], r[:4]))

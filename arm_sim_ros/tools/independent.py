@@ -31,6 +31,12 @@ def covers(scene) -> str | None:
     return None
 
 
+def arriving(gap: float, velocity: float) -> float:
+    """A boundary's switching function: the gap, except on the boundary moving away from it
+    (a restart just after a switch there), where it does not switch again."""
+    return 1e-12 if abs(gap) < 1e-9 and velocity >= 0.0 else gap
+
+
 class Arm:
     """M(q) q̈ + b(q, q̇) + g(q) = τ: from the kinematics of the links' centres and the tip."""
 
@@ -145,15 +151,21 @@ class Independent:
                 out.append((lambda t, x, i=i, s=sign: s * self.solve(x, mode, zone)[1][i],
                             "release", i))
             if self.hard and mode[i] not in (0, "lower", "upper"):
-                out.append((lambda t, x, i=i: self.upper[i] - x[i], "impact", i))
-                out.append((lambda t, x, i=i: x[i] - self.lower[i], "impact", i))
+                # arriving only: a restart on the stop moving away is no impact
+                out.append((lambda t, x, i=i: arriving(self.upper[i] - x[i], -x[2 + i]),
+                            "impact", i))
+                out.append((lambda t, x, i=i: arriving(x[i] - self.lower[i], x[2 + i]),
+                            "impact", i))
             if self.k is not None:
                 if zone[i] == 0:
-                    out.append((lambda t, x, i=i: self.upper[i] - x[i], "enter", i))
-                    out.append((lambda t, x, i=i: x[i] - self.lower[i], "enter", i))
+                    out.append((lambda t, x, i=i: arriving(self.upper[i] - x[i], -x[2 + i]),
+                                "enter", i))
+                    out.append((lambda t, x, i=i: arriving(x[i] - self.lower[i], x[2 + i]),
+                                "enter", i))
                 else:
                     edge = self.upper[i] if zone[i] > 0 else self.lower[i]
-                    out.append((lambda t, x, i=i, s=zone[i], e=edge: s * (x[i] - e), "leave", i))
+                    out.append((lambda t, x, i=i, s=zone[i], e=edge:
+                                arriving(s * (x[i] - e), s * x[2 + i]), "leave", i))
         for g, _, _ in out:
             g.terminal, g.direction = True, -1
         return out
