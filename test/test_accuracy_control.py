@@ -159,3 +159,15 @@ def test_the_node_reports_books_that_do_not_close_as_an_error():
     sim.run(10.0)
     assert sim.books_fault and health(False, 0, 0, sim.books_fault) == (ERROR, sim.books_fault)
     assert health(False, 0, 0, None)[0] != ERROR
+
+
+def test_a_contact_too_stiff_to_resolve_is_refused_at_once_not_run_for_ever():
+    """Issue 24: an engaged compliant limit with damping 1e12 asked for ~1e12 sub-steps a
+    step and never ended; past the planner's bound the step is refused, said in the
+    physics' words."""
+    scene = load_scene("compliant_limit").replace(**{"joint_limits.damping": 1e12},
+                                                  initial_positions=(1.3, 0.0))
+    sim = Simulator(scene)
+    sim.run(0.05)
+    assert sim.holding and "compliant limit is engaged" in sim.fault
+    assert sim.state[:2] == (1.3, 0.0)

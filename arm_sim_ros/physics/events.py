@@ -157,7 +157,12 @@ class Switching:
         while remaining > 1e-15 * h:
             mode = self.mode
             rhs, _, guard, kinds, _ = self.functions(mode)
-            cap = h / self.substeps_for(h, bool(mode[2] or mode[3]))
+            planned = self.substeps_for(h, bool(mode[2] or mode[3]))
+            if planned > stability.MAX_SUBSTEPS:      # bounded: refused, never a hang
+                raise model.StepRefused(f"needs more than {stability.MAX_SUBSTEPS} sub-steps while a "
+                                 "compliant limit is engaged to stay stable; reduce step_size "
+                                 "or the limit's stiffness and damping")
+            cap = h / planned
             count = max(1, ceil(remaining / cap - 1e-9))
             dt = remaining / count
             for k in range(count):

@@ -16,9 +16,15 @@ class ParameterError(ValueError):
     """A physical parameter set that cannot describe a real arm."""
 
 
+class StepRefused(ValueError):
+    """A step refused for a physical reason its message gives (too stiff for the plan)."""
+
+
 def arithmetic_fault(error: ArithmeticError | ValueError) -> str:
     """What an arithmetic error in a step means for the arm, in its words rather than
     Python's ("math domain error", "float division by zero", "math range error")."""
+    if isinstance(error, StepRefused):
+        return str(error)
     if isinstance(error, ZeroDivisionError):
         return "a quantity divided by one that vanished (a singular mass matrix or a zero rate)"
     if isinstance(error, OverflowError):

@@ -25,7 +25,7 @@ from functools import lru_cache
 from math import ceil, cos, hypot, pi, sin
 
 from .integrators import RK4, ButcherTableau, exponential_rk4, integrates_decay_exactly
-from .model import ArmParameters, mass_matrix
+from .model import ArmParameters, StepRefused, mass_matrix
 
 # Sub-steps aim at this fraction of the limit, d h_sub Lambda = 1.0: there R(-1) = 0.375 is
 # close to the exact decay e^-1 = 0.368, so a kicked arm's dissipation books stay right
@@ -156,7 +156,7 @@ def substepping(step, substeps: int):
         return step
     if substeps > MAX_SUBSTEPS:
         def refuse(f, y, h):
-            raise ValueError(f"it needs more than {MAX_SUBSTEPS} sub-steps to stay stable; "
+            raise StepRefused(f"it needs more than {MAX_SUBSTEPS} sub-steps to stay stable; "
                              "reduce step_size or damping")
         return refuse
 
