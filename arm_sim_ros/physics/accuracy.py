@@ -37,6 +37,7 @@ from .controller import SAFETY, Control, retake, said_count, said_unreachable
 from .integrators import compile_step
 from .shadow import LOST, MIN_EVERY, Shadow, Twin, next_every
 
+NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
 ROUNDING = 1e-13           # the least scaled error per step a tolerance asks for (doubles)
 TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
 DEFAULT_MAX_SUBSTEPS = 1000   # the tolerance's ceiling per step (scene key max_substeps)
@@ -72,6 +73,7 @@ class Accuracy:
         self.booked_taken = 0         # sub-steps run in split steps before `since`
         self.shadow = Shadow(self.states)
         self.every = MIN_EVERY        # steps between checks (schedule): often until it is smooth
+        self.tried = {}               # a switching step's attempts: part -> (count, scaled)
         self.said_lost = False
         self.cap = self.ceiling       # lowered where the tolerance cannot be reached
         self.free = Control(self.base, self.cap)
@@ -86,6 +88,8 @@ class Accuracy:
     def use(self, n: int) -> None:
         """Take n equal sub-steps from now on."""
         self.free.n = n
+        if self.stepper is not None:   # (a retaken switching step may have raised it)
+            self.stepper.substeps = n
         if n != self.substeps:
             self.substeps = n
             if self.stepper is not None:
@@ -97,22 +101,21 @@ class Accuracy:
 
     def plain(self, f, y, h):
         """The planned step, and the shadow's beside it."""
+        before = sum(self.stepper.counts.values()) if self.stepper is not None else 0
         y1 = self.advance(f, y, h)
         if self.shadow.last is not y1:   # (a switching step may have been checked instead)
-            self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin)
+            self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin, before != (
+                sum(self.stepper.counts.values()) if self.stepper is not None else 0))
         return y1
 
     def carry(self, previous, steps: int) -> None:
-        """Go on from the books `previous` after `steps` steps: their global error and its
-        shadow's offset, a check at once."""
+        """Go on from the books `previous` after `steps` steps (their shadow), checked now."""
         self.shadow.carry(previous.shadow)
         self.booked_taken = previous.taken(steps) or 0
         self.since = self.due = steps
 
     def accumulated(self, steps: int = 0, closing: bool = False) -> float:
-        """The global error estimate: the largest distance of the motion from its shadow
-        (the same steps from the estimated true state) since reset, rad and rad/s."""
-        return self.shadow.largest
+        return self.shadow.largest        # the global error estimate (shadow.py)
 
     def taken(self, steps: int) -> int:
         """Sub-steps run in split steps over `steps` steps since reset (0: plain steps),
@@ -160,11 +163,12 @@ class Accuracy:
         first, wanted = scaled, n
         if self.tolerance:
             wanted = self.free.ask(self.ratio(scaled, h), self.order)
+            start = (n, scaled)
             while scaled > self.target(h) and n < self.cap:      # a miss: retaken
-                before, n = scaled, retake(n, self.ratio(scaled, h), self.order, self.cap)
+                n = retake(n, self.ratio(scaled, h), self.order, self.cap)
                 y1, error, scaled, signed = self.measure(f, y, h, n)
                 self.free.n = n
-                if scaled > 0.5 * before:         # splitting does not reduce it: stop here
+                if n >= GIVE_UP * start[0] and scaled > NO_GAIN * start[1]:   # no gain
                     said_unreachable(self, scaled, n, h)
                     break
                 wanted = self.free.ask(self.ratio(scaled, h), self.order)
@@ -175,32 +179,34 @@ class Accuracy:
 
     def switching(self, f, y, h, index, n):
         """A step of a switching scene: every sub-step (each smooth piece between located
-        switches) doubled, errors summed, free flight and compliant contact apart; the
-        counts the controller asks for apply from the next step on (this one's switches
-        are already booked)."""
-        sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0]}    # error, scaled, pieces
-        stepper, signed = self.stepper, [0.0] * self.states
-
-        def piece(rhs, y0, dt, full):
-            error, scaled, vector = self.doubled(rhs, y0, dt, full)
-            part = sums[bool(stepper.mode[2] or stepper.mode[3])]
-            part[0] += error
-            part[1] += scaled
-            part[2] += 1
-            signed[:] = [a + b for a, b in zip(signed, vector)]
-
-        switches = sum(stepper.counts.values())
-        y1 = stepper.advance(f, y, h, piece)
+        switches) doubled, errors summed, free flight and compliant contact apart. A step
+        that misses the tolerance is taken again with more sub-steps where it missed (its
+        switches, counts and messages as the last attempt has them), so the error made at
+        a switch is controlled like any other."""
+        stepper = self.stepper
+        kept, emit, heard = keep(stepper), stepper.emit, []
+        stepper.emit = lambda kind, message: heard.append((kind, message))
+        try:
+            y1, sums, signed = attempt(self, f, y, h)
+            while self.tolerance and more(self, sums, h):
+                restore(stepper, kept)
+                heard.clear()
+                y1, sums, signed = attempt(self, f, y, h)
+        finally:
+            stepper.emit = emit
+        for kind, message in heard:
+            emit(kind, message)
         predicted, self.shadow.local = self.shadow.local, signed
-        self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin)
-        if sums[True][2] or sum(stepper.counts.values()) != switches:
+        switched = sum(stepper.counts.values()) != kept[2]
+        self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin, switched)
+        if sums[True][2] or switched:
             # a switch's or a contact's error is its step's own: the steps after carry the
             # latest smooth estimate, and are checked again soon
             self.shadow.local = predicted or [0.0] * self.states
             predicted = None
         error = sums[False][0] + sums[True][0]
         scaled = sums[False][1] + sums[True][1]
-        wanted = n
+        wanted = n = stepper.substeps
         if self.tolerance:
             if sums[False][2]:
                 wanted = self.free.ask(self.ratio(sums[False][1], h), self.order)
@@ -231,7 +237,7 @@ class Accuracy:
             scale = (n / wanted) ** self.order
             self.shadow.local = [e * scale for e in self.shadow.local]
         self.use(wanted)
-        self.due = index + (MIN_EVERY if soon else self.schedule(predicted, measured))
+        self.due = index + (1 if soon else self.schedule(predicted, measured))
         if self.shadow.lost and not self.said_lost and self.emit is not None:
             self.said_lost = True
             self.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = "
@@ -239,6 +245,58 @@ class Accuracy:
                       "step too coarse for it, or chaos); the estimate stops at that bound")
         if self.tolerance:
             said_count(self, wanted, first, h, scaled)
+
+
+def attempt(books, f, y, h):
+    """(the step, {engaged: [error, scaled, pieces]}, signed error) with every piece
+    doubled."""
+    sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0]}
+    stepper, signed = books.stepper, [0.0] * books.states
+
+    def piece(rhs, y0, dt, full):
+        error, scaled, vector = books.doubled(rhs, y0, dt, full)
+        part = sums[bool(stepper.mode[2] or stepper.mode[3])]
+        part[0] += error
+        part[1] += scaled
+        part[2] += 1
+        signed[:] = [a + b for a, b in zip(signed, vector)]
+
+    return stepper.advance(f, y, h, piece), sums, signed
+
+def more(books, sums, h) -> bool:
+    """Raise the counts of the parts (free flight, contact) that missed the tolerance;
+    False when none did, or none can be raised (the cap, or no gain: said once)."""
+    stepper, raised = books.stepper, False
+    for engaged, (_, scaled, pieces) in sums.items():
+        if not pieces or scaled <= books.target(h):
+            continue
+        now = stepper.substeps_for(h, True) if engaged else stepper.substeps
+        first = books.tried.setdefault(engaged, (now, scaled))
+        if now >= GIVE_UP * first[0] and scaled > NO_GAIN * first[1]:
+            said_unreachable(books, scaled, now, h)      # more sub-steps bought nothing
+            continue
+        wanted = retake(now, books.ratio(scaled, h), books.order, books.cap)
+        if wanted > now:
+            if engaged:
+                stepper.contact_substeps = wanted
+            else:
+                stepper.substeps = books.free.n = wanted
+            raised = True
+    if not raised:
+        books.tried = {}
+    return raised
+
+
+def keep(stepper) -> tuple:
+    """What a switching step changes in its stepper, to take the step again."""
+    return stepper.mode, stepper.last, sum(stepper.counts.values()), dict(stepper.counts), \
+        stepper.extra_substeps
+
+
+def restore(stepper, kept) -> None:
+    stepper.mode, stepper.last, _, counts, stepper.extra_substeps = kept
+    stepper.counts.clear()
+    stepper.counts.update(counts)
 
 
 class Embedded:

@@ -32,6 +32,7 @@ TIME_TOLERANCE = 1e-12    # s: an event's time is known to this (the bracket's w
 MAX_EVENTS_PER_STEP = 64  # beyond this (chattering) the rest of the step switches unlocated
 REST_SPEED = 1e-4         # rad/s: a bounce slower than this (e < 1) ends at rest on the limit
 CONTACT_RESOLUTION = 0.25  # h_sub |λ| while a compliant limit is engaged: ~12 sub-steps a swing
+STEEP = 4.0               # Stribeck velocities: within this a sliding joint's step is estimated
 EMIT_FIRST = 5            # events reported one by one; then a summary at 10, 100, 1000 ...
 
 
@@ -143,7 +144,7 @@ class Switching:
         elif self.clamps is not None and self.clamps.stale():   # a new command
             self.mode = self.settle(y, self.clamped(y, self.mode))
         rhs, _, guard, kinds, _ = self.functions(self.mode)
-        engaged = self.mode[2] or self.mode[3]        # a compliant limit (its zones)
+        engaged = self.mode[2] or self.mode[3] or steep(self, y)   # contact, or Stribeck's
         if self.substeps == 1 and not engaged:        # the common case
             y1 = self.step(rhs, y, h)
             if not kinds or min(guard(*y1[:self.width])) >= 0.0:
@@ -157,12 +158,7 @@ class Switching:
         while remaining > 1e-15 * h:
             mode = self.mode
             rhs, _, guard, kinds, _ = self.functions(mode)
-            planned = self.substeps_for(h, bool(mode[2] or mode[3]))
-            if planned > stability.MAX_SUBSTEPS:      # bounded: refused, never a hang
-                raise model.StepRefused(f"needs more than {stability.MAX_SUBSTEPS} sub-steps while a "
-                                 "compliant limit is engaged to stay stable; reduce step_size "
-                                 "or the limit's stiffness and damping")
-            cap = h / planned
+            cap = h / bounded(self.substeps_for(h, bool(mode[2] or mode[3])))
             count = max(1, ceil(remaining / cap - 1e-9))
             dt = remaining / count
             for k in range(count):
@@ -264,6 +260,26 @@ class Switching:
         elif total >= 10 and str(total).rstrip("0") == "1":     # 10, 100, 1000 ...
             counts = ", ".join(f"{k} {n}" for k, n in sorted(self.counts.items()))
             self.emit("switch", f"{total} switches so far ({counts}); latest at t = {when}")
+
+
+def steep(stepper, y) -> bool:
+    """A joint sliding through Stribeck's dip (|q̇| within STEEP x its velocity): the
+    friction law changes faster than anywhere else, so the step is estimated (accuracy.py),
+    like one with a contact, not carried from the last check."""
+    friction = stepper.friction
+    if friction is None or not friction.stribeck_velocity:
+        return False
+    near = STEEP * friction.stribeck_velocity
+    return any(stepper.mode[i] in ("+", "-") and abs(y[2 + i]) < near for i in (0, 1))
+
+
+def bounded(count: int) -> int:
+    """A contact's sub-step count, or StepRefused past the planner's bound (never a hang)."""
+    if count > stability.MAX_SUBSTEPS:
+        raise model.StepRefused(f"needs more than {stability.MAX_SUBSTEPS} sub-steps while a "
+                                "compliant limit is engaged to stay stable; reduce step_size "
+                                "or the limit's stiffness and damping")
+    return count
 
 
 def fired(guard, kinds, y) -> list:

@@ -46,13 +46,17 @@ class Shadow:
         if previous.offset is not None:
             self.offset = list(previous.offset[:4]) + [0.0] * (self.states - 4)
 
-    def follow(self, advance, f, y, y1, h, twin=None) -> None:
-        """After the motion's step y -> y1: the shadow's step (by `advance`)."""
+    def follow(self, advance, f, y, y1, h, twin=None, switched=False) -> None:
+        """After the motion's step y -> y1 (`switched`: a switch in it): the shadow's step
+        (by `advance`)."""
         if sum(y1[:4]) - sum(y1[:4]) != 0.0:   # the motion's step is refused: no shadow
             return
         z = self.start(y)
         if z is not None:
-            self.land(advance(f, z, h), y1, 1, twin)
+            before = sum(twin.counts.values()) if twin is not None else 0
+            z1 = advance(f, z, h)
+            switched = switched or (twin is not None and sum(twin.counts.values()) != before)
+            self.land(z1, y1, 1, twin, switched)
 
     def start(self, y):
         """The shadow's state beside the motion's y, to step from (None: not followed)."""
@@ -63,17 +67,20 @@ class Shadow:
             self.shadow = (*(a - e for a, e in zip(y[:n], offset)), *y[n:])
         return self.shadow
 
-    def land(self, z1, y1, steps: int = 1, twin=None) -> None:
+    def land(self, z1, y1, steps: int = 1, twin=None, switched=False) -> None:
         """The shadow stepped `steps` steps to z1, less their local errors (over a few steps
-        the motion carries a correction almost unchanged), beside the motion's y1."""
+        the motion carries a correction almost unchanged), beside the motion's y1. In a step
+        where either switched, velocities are not compared: an impact a step apart in the
+        two (a hair's difference in the time of arrival) is a jump, not an error."""
         n = self.states
         z1 = (*(a - steps * e for a, e in zip(z1[:n], self.local)), *z1[n:])
         if twin is not None:
             twin.last = z1            # its mode goes on from the corrected state
         offset = [a - b for a, b in zip(y1[:n], z1[:n])]
-        distance = max(abs(offset[0]), abs(offset[1]), abs(offset[2]), abs(offset[3]))
-        scaled = max(abs(offset[0]), abs(offset[1]), abs(offset[2]) / (1.0 + abs(y1[2])),
-                     abs(offset[3]) / (1.0 + abs(y1[3])))
+        seen = offset[:2] if switched else offset[:4]
+        distance = max(abs(v) for v in seen)
+        scaled = max(abs(offset[0]), abs(offset[1]), *(() if switched else (
+            abs(offset[2]) / (1.0 + abs(y1[2])), abs(offset[3]) / (1.0 + abs(y1[3])))))
         if not scaled <= LOST:        # NaN too: the motion is lost, its error unknowable
             self.lost, distance = True, max(self.largest, LOST)
         self.largest = max(self.largest, distance)

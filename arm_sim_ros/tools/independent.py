@@ -193,8 +193,8 @@ class Independent:
             mode[i] = -int(np.sign(self.solve(x, mode, zone)[1][i]))
         elif kind == "release":
             mode[i] = 0 if self.fc is not None else None
-        elif kind == "enter":
-            zone[i] = 1 if x[i] >= self.upper[i] else -1
+        elif kind == "enter":           # at the nearer limit (the event leaves it on it)
+            zone[i] = 1 if abs(x[i] - self.upper[i]) < abs(x[i] - self.lower[i]) else -1
         elif kind == "leave":
             zone[i] = 0
         elif kind == "impact":
@@ -233,6 +233,7 @@ class Independent:
         x = np.array([*self.scene.initial_positions, *self.scene.initial_velocities], float)
         mode, zone = self.initial(x)
         t, out, k = 0.0, [], 0
+        self.switch_times = []        # when each switch happened
         end = times[-1]
         while k < len(times):
             events = self.events(mode, zone)
@@ -252,6 +253,7 @@ class Independent:
                 break
             which = next(n for n, ts in enumerate(sol.t_events) if len(ts) and ts[0] == stop)
             t, x = stop, sol.y_events[which][0].copy()
+            self.switch_times.append(t)
             mode, zone = list(mode), list(zone)
             mode = self.switch(events[which][1], events[which][2], x, mode, zone)
         return out
