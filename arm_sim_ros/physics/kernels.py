@@ -6,39 +6,22 @@ KERNELS = '''
 @njit(cache=True)
 def advance(y, h, steps, substeps, K, C, E0, R0, R1, largest):
     """Up to `steps` plain steps from y (in place); stops before a non-finite one.
-    (steps taken, largest |residual|)."""
-    state = ({items},)
-    dt = h / substeps
-    done = 0
-    for n in range(steps):
-        new = step(state, h, K) if substeps == 1 else state
-        if substeps > 1:
-            for k in range(substeps):
-                new = step(new, dt, K)
-        finite = True
-        for v in new:
-            finite = finite and isfinite(v)
-        if not finite:
-            break
-        state = new
-        done += 1
-        r = abs(residual(state, C, E0, R0, R1))
-        if r > largest:
-            largest = r
-    for k in range({width}):
-        y[k] = state[k]
+    (steps taken, largest |residual|). No shadow: advance_shadowed with none to follow."""
+    done, largest, far, gone = advance_shadowed(y, y, y, 0, h, steps, substeps, K, C, E0, R0,
+                                                R1, largest, 0.0, -1.0)
     return done, largest
 
 
 @njit(cache=True)
 def advance_shadowed(y, z, L, n, h, steps, substeps, K, C, E0, R0, R1, largest, far, lost):
     """advance, the shadow beside it (shadow.py: z -> step(z) - L on the first n states, the
-    largest |y - z| in `far`, not followed past `lost`). (done, largest, far, lost or not)"""
+    largest |y - z| in `far`, not followed past `lost`; none if `lost` < 0).
+    (done, largest, far, lost or not)"""
     state = ({items},)
     shade = ({zitems},)
     dt = h / substeps
     done = 0
-    gone = False
+    gone = not lost >= 0.0
     for m in range(steps):
         new = step(state, h, K) if substeps == 1 else state
         if substeps > 1:
