@@ -101,11 +101,11 @@ class Accuracy:
 
     def plain(self, f, y, h):
         """The planned step, and the shadow's beside it."""
-        before = sum(self.stepper.counts.values()) if self.stepper is not None else 0
+        before = self.stepper.total if self.stepper is not None else 0
         y1 = self.advance(f, y, h)
         if self.shadow.last is not y1:   # (a switching step may have been checked instead)
             self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin, before != (
-                sum(self.stepper.counts.values()) if self.stepper is not None else 0))
+                self.stepper.total if self.stepper is not None else 0))
         return y1
 
     def carry(self, previous, steps: int) -> None:
@@ -114,7 +114,7 @@ class Accuracy:
         self.booked_taken = previous.taken(steps) or 0
         self.since = self.due = steps
 
-    def accumulated(self, steps: int = 0, closing: bool = False) -> float:
+    def accumulated(self) -> float:
         return self.shadow.largest        # the global error estimate (shadow.py)
 
     def taken(self, steps: int) -> int:
@@ -197,7 +197,7 @@ class Accuracy:
         for kind, message in heard:
             emit(kind, message)
         predicted, self.shadow.local = self.shadow.local, signed
-        switched = sum(stepper.counts.values()) != kept[2]
+        switched = stepper.total != kept[2]
         self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin, switched)
         if sums[True][2] or switched:
             # a switch's or a contact's error is its step's own: the steps after carry the
@@ -289,12 +289,12 @@ def more(books, sums, h) -> bool:
 
 def keep(stepper) -> tuple:
     """What a switching step changes in its stepper, to take the step again."""
-    return stepper.mode, stepper.last, sum(stepper.counts.values()), dict(stepper.counts), \
+    return stepper.mode, stepper.last, stepper.total, dict(stepper.counts), \
         stepper.extra_substeps
 
 
 def restore(stepper, kept) -> None:
-    stepper.mode, stepper.last, _, counts, stepper.extra_substeps = kept
+    stepper.mode, stepper.last, stepper.total, counts, stepper.extra_substeps = kept
     stepper.counts.clear()
     stepper.counts.update(counts)
 
@@ -321,7 +321,7 @@ class Embedded:
         self.shadow.carry(previous.shadow)
         self.due = steps
 
-    def accumulated(self, steps: int = 0, closing: bool = False) -> float:
+    def accumulated(self) -> float:
         return self.shadow.largest
 
     def taken(self, steps: int) -> int:
@@ -359,7 +359,7 @@ class Unchecked:
     def reset(self) -> None:
         pass
 
-    def accumulated(self, steps: int, closing: bool = False) -> float:
+    def accumulated(self) -> float:
         return self.error_estimate
 
     def taken(self, steps: int) -> int:

@@ -64,6 +64,7 @@ class Switching:
     def __init__(self, dynamics, tableau, step, substeps, emit, clock, counts=None):
         self.dynamics, self.arm, self.step, self.emit = dynamics, dynamics.arm, step, emit
         self.clock, self.counts = clock, Counter() if counts is None else counts
+        self.total = sum(self.counts.values())   # switches since reset (counts carried on)
         effects = {e.name: e for e in dynamics.active}
         self.friction, self.limits = effects.get("friction"), effects.get("joint_limits")
         self.hard = self.limits is not None and self.limits.hard
@@ -85,10 +86,9 @@ class Switching:
         self._functions, self.mode, self.last = {}, None, None
 
     def reset(self) -> Counter:
-        """Forget the mode (found again from the next state) and the counts, which are
-        returned: Simulator.switch_events."""
+        """Forget the mode (found again from the next state) and the counts (returned)."""
         self.counts.clear()
-        self.mode, self.last, self.extra_substeps = None, None, 0
+        self.mode, self.last, self.extra_substeps, self.total = None, None, 0, 0
         return self.counts
 
     # --- modes ---------------------------------------------------------------------------
@@ -253,7 +253,7 @@ class Switching:
 
     def count(self, kind: str, joint: int, at) -> None:
         self.counts[kind] += 1
-        total = sum(self.counts.values())
+        self.total = total = self.total + 1
         when = f"{self.clock() + at:.9f} s"
         if total <= EMIT_FIRST:
             self.emit("switch", f"{kind} of joint {joint + 1} at t = {when}")

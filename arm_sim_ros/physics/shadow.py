@@ -3,8 +3,8 @@ measure the local error it is built from (accuracy.py).
 """
 from __future__ import annotations
 
-CHECK_EVERY = 16          # steps between doubling checks (a check: 2 steps' evaluations):
-MIN_EVERY, MAX_EVERY = 2, 32   # from MIN_EVERY at the start, then as often as the local
+# Steps between doubling checks (a check: 2 steps' evaluations): MIN_EVERY at the start,
+MIN_EVERY, MAX_EVERY = 2, 32   # then as often as the local
 ROUGH, SMOOTH = 0.5, 0.125     # error moves: twice as often past ROUGH x its size, half
                                # as often under SMOOTH x its size
 LOST = 1.0                # rad (velocities scaled): a global error beyond this has lost the motion
@@ -53,9 +53,9 @@ class Shadow:
             return
         z = self.start(y)
         if z is not None:
-            before = sum(twin.counts.values()) if twin is not None else 0
+            before = twin.total if twin is not None else 0
             z1 = advance(f, z, h)
-            switched = switched or (twin is not None and sum(twin.counts.values()) != before)
+            switched = switched or (twin is not None and twin.total != before)
             self.land(z1, y1, 1, twin, switched)
 
     def start(self, y):

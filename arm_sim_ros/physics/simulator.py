@@ -165,7 +165,7 @@ class Simulator:
     def accumulated_error(self) -> float:
         """The global error estimate since reset: the largest distance of the motion from
         its shadow (shadow.py), rad and rad/s; NaN where steps are not estimated."""
-        return self.accuracy.accumulated(self.steps)
+        return self.accuracy.accumulated()
 
     @property
     def confirmed(self) -> bool:      # the state now found sound: earlier ones are final
