@@ -170,7 +170,7 @@ COMPLIANT = {"joint_limits.lower": [-0.5, -2.5], "joint_limits.upper": [0.5, 2.5
              "joint_limits.stiffness": 500.0, "joint_limits.damping": 2.0}
 SERVO = {"servo.interface": ["position", "velocity"], "servo.kp": [200.0, 20.0],
          "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 0.0], "servo.integral_limit": [20.0, 5.0],
-         "servo.tracking": [2.0, 1.0]}
+         "servo.tracking": [2.0, 1.0], "servo.rate": 1000.0}
 POLICY = {"hard_limits": "gravity_compensation", "compliant_limits": "gravity_compensation",
           "servo": "command_gravity_compensation"}
 

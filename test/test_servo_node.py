@@ -111,3 +111,18 @@ def test_no_command_is_held_forever_a_timed_out_set_point_holds_where_the_arm_is
     assert core.command_timeouts == 1
     assert [r for r in caplog.records if "servos hold where they are" in r.getMessage()]
     assert abs(state.velocity[0]) < 1e-3 and abs(state.position[0] - q) < 0.05
+
+
+def test_a_servo_rate_set_live_samples_the_commands_and_a_bad_one_is_refused():
+    core = make_core(command_timeout=0.0)
+    core.on_joint_state_command(NAMES, [0.8, -0.2], [], [])
+    ticks(core, 10)
+    before = core.sim.joint_torque()
+    assert core.set_parameters({"servo.rate": 1000.0}) == ["servo.rate"]   # every step
+    assert core.sim.joint_torque() == pytest.approx(before, abs=1e-9)   # bumpless
+    assert core.sim.sampled is not None
+    state = ticks(core, 300)
+    assert state.position == pytest.approx([0.8, -0.2], abs=1e-3)
+    with pytest.raises(ParameterRefused, match="servo.rate = 300 Hz does not sample on the steps"):
+        core.set_parameters({"servo.rate": 300.0})
+    assert core.config.values["servo.rate"] == 1000.0

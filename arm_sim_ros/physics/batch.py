@@ -74,6 +74,8 @@ class Batch:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
                              "are located arm by arm (physics/events.py); run such a scene "
                              "one arm at a time (arm-sim run)")
+        if (scene.servo or {}).get("rate"):     # its samples are taken arm by arm
+            raise SceneError("batch rollouts cannot run a discrete servo (servo.rate); arm-sim run")
         if count is None:
             count = len(positions) if positions is not None else (
                 len(velocities) if velocities is not None else 1)

@@ -40,6 +40,7 @@ class Shadow:
         self.last = self.shadow = None
         self.largest = 0.0
         self.lost = False            # the distance passed LOST: no longer followed
+        self.sampled = None          # a discrete servo: the shadow steps under its own samples
 
     def carry(self, previous) -> None:
         self.largest, self.local = previous.largest, None
@@ -54,7 +55,8 @@ class Shadow:
         z = self.start(y)
         if z is not None:
             before = twin.total if twin is not None else 0
-            z1 = advance(f, z, h)
+            z1 = advance(f, z, h) if self.sampled is None else self.sampled.beside(
+                advance, f, z, h)
             switched = switched or (twin is not None and twin.total != before)
             self.land(z1, y1, 1, twin, switched)
 

@@ -19,6 +19,7 @@ from math import isfinite, nan
 from . import accuracy, compiled, guard, model, stability
 from .events import switching as switching_for
 from .dynamics import build_dynamics
+from .effects import servo
 from .integrators import INTEGRATORS, step_for
 from .scene import Scene
 
@@ -74,9 +75,8 @@ class Sample:
 
 class Simulator:
     def __init__(self, scene: Scene):
-        self.scene = scene
-        self.step_size = scene.step_size
-        self._tableau = INTEGRATORS[scene.integrator]
+        self.scene, self.step_size, self._tableau = scene, scene.step_size, INTEGRATORS[
+            scene.integrator]
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
         self.steps = 0
@@ -110,8 +110,7 @@ class Simulator:
                       + (0.0,) * (len(self.extra) + len(self.channels)))
         self.steps = 0
         self.fault = None            # why the latest refused step was refused, None if none
-        self.refused_steps = 0
-        self._refused_step = -1      # index of the latest refused step
+        self.refused_steps, self._refused_step = 0, -1    # how many; the latest's index
         self.saturated_steps = 0     # steps ending where a driver asks beyond its voltage limit
         self.dynamics.command[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
@@ -122,6 +121,8 @@ class Simulator:
         self.books_fault = None      # why the energy books do not close, said once
         self.switch_events = self.switching.reset() if self.switching else Counter()  # by kind
         self.accuracy.reset()
+        if self.sampled is not None:     # what the first sample will hold: no stale torque
+            self.sampled.held[:] = self.sampled.law(self.state, torque_only=True)
 
     @property
     def time(self) -> float:
@@ -181,6 +182,8 @@ class Simulator:
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
             return
+        if self.sampled is not None and self.steps % self.sampled.every == 0:
+            servo.sample(self)      # a discrete servo samples, on its grid from t = 0
         books = self.accuracy       # plain planned steps until a check is due: no wrapper
         try:
             y = (books.plain if self.steps < books.due else books.check)(
@@ -229,8 +232,7 @@ class Simulator:
             listener(event)
 
     def energies(self, state) -> tuple[float, float]:
-        """(kinetic, stored); NaN where sin fails (angles near 1e308), not a crash."""
-        return energies(self, state)
+        return energies(self, state)     # (kinetic, stored), NaN where sin fails
 
     def energy(self, state) -> float:
         return sum(self.energies(state))
@@ -281,6 +283,7 @@ def steppers(sim: Simulator, scene: Scene) -> None:
                                   lambda: sim.time, getattr(sim, "switch_events", None))
     sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
     sim.path = getattr(step, "path", "python")
+    sim.sampled = servo.sampled(sim.dynamics)    # a discrete servo (its rate), or None
     sim.accuracy = books_for(sim, scene, step)   # the planned step, its error checked
 
 

@@ -96,7 +96,7 @@ def _servo(scene, arm, believed, command, windings) -> Servo:
                  effort_limits=scene.effort_limits, command=command,
                  compensation=_believed_torque(scene, arm, believed),
                  work_kind="transfer" if windings else "input",
-                 believed="gc" if believed is not None else "g")
+                 believed="gc" if believed is not None else "g", step_size=scene.step_size)
 
 
 def _actuator(scene, arm, believed, command, windings) -> Actuator | None:

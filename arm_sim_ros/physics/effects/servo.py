@@ -23,6 +23,15 @@ request, or the integral is past its clamp, wᵢ is pulled back at the tracking 
 state, so RK4 needs no event. The servo is the actuator: its power τᵀq̇ is booked as `work`
 (an input; a transfer through windings, whose electrical input is the input then), so the
 energy books close as with any policy. It stores no energy.
+
+With a `rate` (Hz) the servo is a discrete controller with zero-order hold: at each sample
+t_k = k T (T = 1/rate, from t = 0) it reads q, q̇ and the set-points, computes τ_k by the
+same law (the derivative term on the sampled velocity, as above), holds it until t_k+1, and
+steps its integral by forward Euler, wᵢ += T (kiᵢ eᵢ + bᵢ (τᵢ − rᵢ + clamp(wᵢ) − wᵢ)) (the
+discrete back-calculation). Samples fall on step boundaries (T a whole number of steps, else
+the scene is refused), so within a step the torque is a constant and RK4 keeps its order;
+the integrals stay in the state (their rate 0 between samples) and the held torque is the
+`work` as before.
 """
 from __future__ import annotations
 
@@ -50,12 +59,16 @@ class Servo(Actuator):
                   description="largest integral torque (none = only the anti-windup)"),
         Parameter("tracking", "pair", "1/s", "positive", default=None,
                   description="anti-windup back-calculation rate (none = ki/kp)"),
+        Parameter("rate", "float", "Hz", "positive", default=None,
+                  description="sample rate of a discrete servo with zero-order hold "
+                              "(none = continuous); 1/rate a whole number of steps"),
     )
 
     def __init__(self, interface=("position", "position"), kp=(0.0, 0.0), ki=(0.0, 0.0),
-                 kd=(0.0, 0.0), integral_limit=None, tracking=None, *, policy="setpoint",
-                 setpoint=(0.0, 0.0), initial_positions=(0.0, 0.0), effort_limits=None,
-                 command=None, compensation=None, work_kind="input", believed="g"):
+                 kd=(0.0, 0.0), integral_limit=None, tracking=None, rate=None, *,
+                 policy="setpoint", setpoint=(0.0, 0.0), initial_positions=(0.0, 0.0),
+                 effort_limits=None, command=None, compensation=None, work_kind="input",
+                 believed="g", step_size=None):
         for i, (kind, d) in enumerate(zip(interface, kd)):
             if kind == "velocity" and d != 0.0:
                 raise ParameterError(f"servo.kd[{i}] = {d:g} on a velocity joint would act on "
@@ -77,9 +90,17 @@ class Servo(Actuator):
             for i, (kind, value) in enumerate(zip(interface, setpoint)):
                 self.setpoint[{"position": 0, "velocity": 2, "effort": 4}[kind] + i] = value
         self.state = ("integral1", "integral2")
+        # a discrete servo: a sample every `every` steps (the scene's: step_size known), the
+        # torque held since the latest
+        timed = rate is not None and step_size is not None
+        self.rate, self.every, self.held = rate, sample_steps(rate, step_size) if timed \
+            else None, [0.0, 0.0]
+        self.shadow_held = [0.0, 0.0]    # what it holds in the error books' shadow (shadow.py)
+        self.period = self.every * step_size if timed else None
 
     def constants(self, arm) -> dict:
-        out = {"command": self.command, "SP": self.setpoint}
+        out = {"command": self.command, "SP": self.setpoint} | (
+            {"HELD": self.held} if self.rate else {})
         for i in (0, 1):
             j = i + 1
             out |= {f"KP{j}": self.kp[i], f"KI{j}": self.ki[i], f"KD{j}": self.kd[i],
@@ -91,6 +112,8 @@ class Servo(Actuator):
         return out
 
     def terms(self) -> list[str]:
+        if self.rate:               # held since the latest sample: a constant in the step
+            return ["t1 = HELD[0]", "t2 = HELD[1]"]
         lines = []
         for i in (0, 1):
             j, kind = i + 1, self.interface[i]
@@ -114,10 +137,12 @@ class Servo(Actuator):
     def rates(self) -> list[str]:
         # no integral action (ki = 0, an effort joint): the integral stays where it is
         return [f"KI{j} * e{j} + KB{j} * (ts{j} - r{j} + wc{j} - integral{j})"
-                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 else "0.0"
-                for j in (1, 2)]
+                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 and not self.rate
+                else "0.0" for j in (1, 2)]    # a discrete servo's: stepped at its samples
 
     def stiffness(self, arm) -> float:
+        if self.rate:               # a constant torque within the step: nothing to resolve
+            return 0.0
         # Velocity feedback (kd on a position joint, kp on a velocity joint) is a damper;
         # the back-calculation a decay of the integral at rate b.
         damping = max(kd if kind == "position" else kp if kind == "velocity" else 0.0
@@ -125,6 +150,8 @@ class Servo(Actuator):
         return damping * worst_stiffness(arm) + max(self.tracking)
 
     def frequency(self, arm) -> float:
+        if self.rate:
+            return 0.0
         # kp on a position joint (ki on a velocity joint) is a spring; ki on a position joint
         # adds a slower third pole, bounded by the same spring scale.
         spring = max((kp if kind == "position" else ki if kind == "velocity" else 0.0)
@@ -132,21 +159,49 @@ class Servo(Actuator):
                      for kind, kp, ki in zip(self.interface, self.kp, self.ki))
         return (spring * worst_stiffness(arm)) ** 0.5
 
-    def requested_torque(self, state):
-        """τᵢ = clamp(rᵢ, ±eᵢ) at `state` (q, q̇, integrals first), as the servo asks now."""
+    def law(self, state, torque_only=False) -> list:
+        """Per joint (eᵢ, rᵢ, clamp(wᵢ), τᵢ): the continuous law at `state` (q, q̇, integrals
+        first) with the set-points now; `torque_only`: the τᵢ alone."""
         q, u, w = state[0:2], state[2:4], state[4:6]
         g = self.compensation(q) if self.compensates else (0.0, 0.0)
-        torque = []
+        out = []
         for i, kind in enumerate(self.interface):
             wc = w[i] if self.integral_limit is None else min(max(w[i], -self.integral_limit[i]),
                                                                self.integral_limit[i])
-            r = (self.kp[i] * (self.setpoint[i] - q[i]) + self.kd[i] * (self.setpoint[2 + i] - u[i])
-                 + wc if kind == "position" else self.kp[i] * (self.setpoint[2 + i] - u[i]) + wc
-                 if kind == "velocity" else self.setpoint[4 + i] if self.policy == "setpoint"
-                 else self.command[i]) + g[i]
+            e = (self.setpoint[i] - q[i] if kind == "position" else
+                 self.setpoint[2 + i] - u[i] if kind == "velocity" else 0.0)
+            r = (self.kp[i] * e + self.kd[i] * (self.setpoint[2 + i] - u[i]) + wc
+                 if kind == "position" else self.kp[i] * e + wc if kind == "velocity"
+                 else self.setpoint[4 + i] if self.policy == "setpoint" else self.command[i]) + g[i]
             limit = self.effort_limits[i] if self.effort_limits is not None else float("inf")
-            torque.append(min(max(r, -limit), limit))
-        return tuple(torque)
+            out.append((e, r, wc, min(max(r, -limit), limit)))
+        return [t for *_, t in out] if torque_only else out
+
+    def requested_torque(self, state):
+        """τᵢ = clamp(rᵢ, ±eᵢ) at `state` (q, q̇, integrals first), as the servo asks now (a
+        discrete servo: what it holds)."""
+        return tuple(self.held if self.rate else self.law(state, torque_only=True))
+
+    def sample(self, state, held) -> tuple:
+        """A discrete servo's sample at `state`: τ_k into `held` from now, the state with the
+        integrals stepped over the period (forward Euler of their continuous rate)."""
+        state, law = list(state), self.law(state)
+        for i, (e, r, wc, torque) in enumerate(law):
+            held[i] = torque
+            if self.interface[i] != "effort" and self.ki[i] > 0:
+                back = self.tracking[i] * (torque - r + wc - state[4 + i])    # anti-windup
+                state[4 + i] += self.period * (self.ki[i] * e + back)
+        return tuple(state)
+
+    def beside(self, advance, f, z, h):
+        """advance(f, z, h) under the shadow's held torque: the shadow follows the true motion,
+        whose servo samples the true state, not the motion's."""
+        mine = self.held[:]
+        self.held[:] = self.shadow_held
+        try:
+            return advance(f, z, h)
+        finally:
+            self.held[:] = mine
 
     def hold(self, q, joints=(0, 1)) -> None:
         """Set-points from the state: a position joint holds `q`, a velocity joint stops."""
@@ -173,6 +228,46 @@ class Servo(Actuator):
         return tuple(integrals)
 
 
+def sample_steps(rate: float, step_size: float) -> int:
+    """Steps per sample of a servo at `rate`: its samples fall on step boundaries (a sample
+    inside a step would change the torque there, and RK4 would lose its order), else one
+    line saying which rates fit."""
+    if not rate * step_size >= 1e-9:
+        raise ParameterError(f"servo.rate = {rate:g} Hz samples less than once in 1e9 steps "
+                             f"of {step_size:g} s; leave it out for a continuous servo")
+    steps = round(1.0 / (rate * step_size))
+    if steps < 1 or abs(steps * rate * step_size - 1.0) > 1e-9:
+        fits = ", ".join(f"{1.0 / (m * step_size):g}" for m in range(
+            max(1, int(1.0 / (rate * step_size))), int(1.0 / (rate * step_size)) + 2))
+        raise ParameterError(f"servo.rate = {rate:g} Hz does not sample on the steps of "
+                             f"{step_size:g} s (1/rate must be a whole number of steps); "
+                             f"rates that do: {fits} Hz")
+    return steps
+
+
+def sample(sim) -> None:
+    """The discrete servo's sample at the start of a step on its grid (t = k/rate): the torque
+    it holds through the next 1/rate s, and its integrals stepped in the state (a state the
+    switching stepper still follows: only integrals changed, which no mode and no right-hand
+    side of a discrete servo reads). The error books' shadow samples its own state."""
+    joint_servo, shadow, before = sim.sampled, sim.accuracy.shadow, sim.state
+    sim.state = joint_servo.sample(before, joint_servo.held)
+    if sim.switching is not None and sim.switching.last is before:
+        sim.switching.last = sim.state
+    z = shadow.start(before)
+    if z is None:                  # not followed (yet): the shadow is the motion
+        joint_servo.shadow_held[:] = joint_servo.held
+    else:
+        shadow.shadow, shadow.last = joint_servo.sample(z, joint_servo.shadow_held), sim.state
+    shadow.sampled = joint_servo
+
+
+def sampled(dynamics) -> Servo | None:
+    """The scene's servo if it is a discrete one (a `rate`), else None."""
+    joint_servo = servo_of(dynamics)
+    return joint_servo if joint_servo is not None and joint_servo.rate else None
+
+
 def servo_of(dynamics) -> Servo | None:
     """The scene's servo effect, None without one."""
     return next((e for e in dynamics.active if isinstance(e, Servo)), None)
@@ -192,10 +287,14 @@ def change_scene(sim, scene) -> None:
         new.setpoint[:] = old.setpoint
     switched = [i for i in (0, 1) if old is None or old.interface[i] != new.interface[i]]
     new.hold(sim.state[0:2], switched)
+    new.held[:] = new.shadow_held[:] = torque     # a discrete servo: until its next sample
+    # a rate changed (continuous <-> discrete): every joint's law now asks anew, so every
+    # joint's integral is set for the torque it received (its set-points kept)
+    retimed = switched if old is not None and old.rate == new.rate else [0, 1]
     integrals = new.bumpless(sim.state, torque)
     g = new.compensation(sim.state[0:2]) if new.compensates else (0.0, 0.0)
     state = list(sim.state)
-    for i in switched:
+    for i in retimed:
         if new.interface[i] == "effort":
             new.command[i] = new.setpoint[4 + i] = torque[i] - g[i]
         state[sim.state_names.index(f"integral{i + 1}")] = integrals[i]
