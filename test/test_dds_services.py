@@ -36,6 +36,8 @@ from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from arm_sim_ros.node.transports.dds_services import (cs_id, endpoint_qos, from_value, to_value,
                                                       user_data_value)
 from arm_sim_ros.node.simulation import SERVICES as SIMULATION_SERVICES
+from arm_sim_ros.node.transports.dds_action import SERVICES as ACTION_SERVICES
+from arm_sim_ros.node.transports.dds_action import TYPE_HASHES as ACTION_HASHES
 from arm_sim_ros.node.transports.dds_simulation import TYPE_HASHES as SIMULATION_HASHES
 from arm_sim_ros.physics.effects import MAPPING_EFFECTS
 from test_node_dds import CONFIG, TIMEOUT, start as start_node, wait_until
@@ -403,11 +405,17 @@ def test_discovery_info_lists_every_service_endpoint_under_the_node():
         "rcl_interfaces::srv::dds_::GetParameters_Request_"
     assert requests["rq/arm_sim/resetRequest"].type_name == "std_srvs::srv::dds_::Trigger_Request_"
     assert replies["rt/parameter_events"].type_name == "rcl_interfaces::msg::dds_::ParameterEvent_"
-    for service in SIMULATION_SERVICES:       # under the namespace, not the node's name
+    for service in SIMULATION_SERVICES + ACTION_SERVICES:   # under the namespace, not ~/
         hash_of = user_data_value(requests[f"rq/{service}Request"].qos, "typehash")
-        assert hash_of in SIMULATION_HASHES.values() and f"rr/{service}Reply" in replies
+        assert hash_of in (SIMULATION_HASHES | ACTION_HASHES).values()
+        assert f"rr/{service}Reply" in replies
+    assert replies["rt/simulate_steps/_action/status"].type_name == \
+        "action_msgs::msg::dds_::GoalStatusArray_"
+    assert replies["rt/simulate_steps/_action/feedback"].type_name == \
+        "simulation_interfaces::action::dds_::SimulateSteps_FeedbackMessage_"
     assert len({user_data_value(s.qos, "serviceid") for s in requests.values()
-                if s.topic_name.startswith("rq/")}) == len(SERVICES) + len(SIMULATION_SERVICES)
+                if s.topic_name.startswith("rq/")}) == len(SERVICES) + len(
+        SIMULATION_SERVICES) + len(ACTION_SERVICES)
 
 
 def test_service_names_follow_the_namespace():
@@ -415,7 +423,7 @@ def test_service_names_follow_the_namespace():
     assert node.services.node == "/robot/arm_sim"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
         f"rq/robot/arm_sim/{s}Request" for s in SERVICES} | {
-        f"rq/robot/{s}Request" for s in SIMULATION_SERVICES}
+        f"rq/robot/{s}Request" for s in SIMULATION_SERVICES + ACTION_SERVICES}
 
 
 def remapped(domain_id, *rules):
@@ -432,7 +440,7 @@ def test_a_remapped_node_serves_its_parameters_and_reset_under_its_new_name():
     assert node.services.node == "/ns/other"
     assert {e.reader.topic.name for e in node.services.endpoints} == {
         f"rq/ns/other/{s}Request" for s in SERVICES} | {
-        f"rq/ns/{s}Request" for s in SIMULATION_SERVICES}
+        f"rq/ns/{s}Request" for s in SIMULATION_SERVICES + ACTION_SERVICES}
     getter = Client(p, "get_parameters", node_name="/ns/other")
     reset = Client(p, "reset", node_name="/ns/other")
     for client in (getter, reset):

@@ -100,7 +100,7 @@ def stamp(m) -> int:
 def test_features_list_exactly_what_is_served():
     node, peer = start(200)
     reply = sim_client(peer, "get_simulator_features").call(node)
-    assert sorted(reply.features.features) == [20, 22, 24, 25, 26, 31, 32]
+    assert sorted(reply.features.features) == [20, 22, 24, 25, 26, 31, 32, 33]
     assert reply.features.spawn_formats == [] and "one node tick" in reply.features.custom_info
 
 
@@ -236,17 +236,33 @@ def fake_simulation_interfaces(monkeypatch):
     package.msg.SimulatorFeatures = message("SimulatorFeatures")
     for name, _, _ in d.TYPES.values():
         setattr(package.srv, name, name)
-    for module in (package, package.msg, package.srv):
+    package.action = types.ModuleType("simulation_interfaces.action")
+    package.action.SimulateSteps = types.SimpleNamespace(
+        Result=message("SimulateSteps.Result"), Feedback=message("SimulateSteps.Feedback"))
+    # rclpy's ActionServer as far as serve uses it: it keeps what it was given
+    rclpy = types.ModuleType("rclpy")
+    rclpy.action = types.ModuleType("rclpy.action")
+    rclpy.action.CancelResponse = types.SimpleNamespace(ACCEPT="accept")
+    rclpy.action.ActionServer = lambda node, kind, name, **callbacks: types.SimpleNamespace(
+        kind=kind, name=name, **callbacks)
+    for module in (package, package.msg, package.srv, package.action, rclpy, rclpy.action):
         monkeypatch.setitem(sys.modules, module.__name__, module)
 
 
-def test_on_rclpy_the_same_services_are_served_when_the_package_imports(monkeypatch):
+def served_by_fakes(monkeypatch):
+    """(fake node, what it published, its SimulationControl) with the package faked."""
     fake_simulation_interfaces(monkeypatch)
     node, published = FakeNode(), []
     core = ArmSimCore(resolve_parameters({"scene": "servo_hold"}), logging.getLogger("t"),
                       wall_clock=lambda: 0.0, start_stamp_ns=0)
-    control = s.SimulationControl(core, published.append)
-    assert rclpy_simulation.serve(node, control) == list(s.SERVICES)
+    return node, published, s.SimulationControl(core, published.append)
+
+
+def test_on_rclpy_the_same_services_are_served_when_the_package_imports(monkeypatch):
+    node, published, control = served_by_fakes(monkeypatch)
+    *served, action = rclpy_simulation.serve(node, control)
+    assert served == list(s.SERVICES) and action.name == "simulate_steps"
+    assert action.cancel_callback(None) == "accept"
     assert {name: kind for name, (kind, _) in node.services.items()} == {
         service: name for service, (name, _, _) in d.TYPES.items()}
     call = lambda name, **fields: node.services[name][1](  # noqa: E731
@@ -264,3 +280,52 @@ def test_on_rclpy_without_the_package_one_line_says_so(monkeypatch):
     node = FakeNode()
     assert rclpy_simulation.serve(node, None) == []
     assert len(node.lines) == 1 and "simulation_interfaces is not installed" in node.lines[0]
+
+
+class FakeGoalHandle:
+    """What the SimulateSteps execute callback uses of rclpy's ServerGoalHandle."""
+
+    def __init__(self, steps):
+        self.request = types.SimpleNamespace(steps=steps)
+        self.is_cancel_requested, self.feedback, self.ended = False, [], None
+
+    def publish_feedback(self, feedback):
+        self.feedback.append((feedback.completed_steps, feedback.remaining_steps))
+
+    def abort(self):
+        self.ended = "aborted"
+
+    def canceled(self):
+        self.ended = "canceled"
+
+    def succeed(self):
+        self.ended = "succeeded"
+
+
+def run_goal(execute, handle, cancel_after=None):
+    """The coroutine as rclpy's executor runs it: resumed after each turn it gives."""
+    coroutine, turns = execute(handle), 0
+    while True:
+        try:
+            coroutine.send(None)
+        except StopIteration as end:
+            return end.value.result
+        turns += 1
+        handle.is_cancel_requested = turns == cancel_after
+
+
+def test_on_rclpy_the_action_follows_the_same_rules(monkeypatch):
+    node, published, control = served_by_fakes(monkeypatch)
+    execute = rclpy_simulation.serve(node, control)[-1].execute_callback
+    playing = FakeGoalHandle(3)
+    result = run_goal(execute, playing)
+    assert playing.ended == "aborted" and result.result == s.RESULT_OPERATION_FAILED
+    assert "paused" in result.error_message and not published
+    control.set_state(s.STATE_PAUSED)
+    done = FakeGoalHandle(4)
+    assert run_goal(execute, done).result == s.RESULT_OK and done.ended == "succeeded"
+    assert done.feedback == [(1, 3), (2, 2), (3, 1), (4, 0)] and len(published) == 4
+    stopped = FakeGoalHandle(100)
+    result = run_goal(execute, stopped, cancel_after=2)
+    assert stopped.ended == "canceled" and result.error_message == "canceled after 2 of 100 steps"
+    assert len(published) == 6

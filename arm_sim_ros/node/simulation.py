@@ -1,7 +1,8 @@
 """The ROS 2 Simulation Interfaces (simulation_interfaces, Jazzy) over the node core: the
 simulation state (playing, paused, stopped), stepping exactly N ticks while paused, reset,
 and the features list. Transports (dds_simulation.py, rclpy) turn requests into these calls
-and the results into replies; the codes and states are the package's constants.
+and the results into replies; the codes and states are the package's constants. The
+SimulateSteps action's goals: simulate_steps.py.
 
 One simulation step here is one tick of the node: steps_per_tick integration steps and one
 JointState (and /clock) published. Paused: no physics, /clock holds, the held JointState
@@ -24,10 +25,10 @@ SCOPE_DEFAULT, SCOPE_TIME, SCOPE_STATE, SCOPE_SPAWNED, SCOPE_ALL = 0, 1, 2, 4, 2
 # simulation_interfaces/msg/SimulatorFeatures: exactly what is served
 SIMULATION_RESET, SIMULATION_RESET_STATE = 20, 22
 SIMULATION_STATE_GETTING, SIMULATION_STATE_SETTING, SIMULATION_STATE_PAUSE = 24, 25, 26
-STEP_SIMULATION_SINGLE, STEP_SIMULATION_MULTIPLE = 31, 32
+STEP_SIMULATION_SINGLE, STEP_SIMULATION_MULTIPLE, STEP_SIMULATION_ACTION = 31, 32, 33
 FEATURES = (SIMULATION_RESET, SIMULATION_RESET_STATE, SIMULATION_STATE_GETTING,
             SIMULATION_STATE_SETTING, SIMULATION_STATE_PAUSE, STEP_SIMULATION_SINGLE,
-            STEP_SIMULATION_MULTIPLE)
+            STEP_SIMULATION_MULTIPLE, STEP_SIMULATION_ACTION)
 CUSTOM_INFO = ("arm_sim: a planar two-link arm. One simulation step is one node tick "
                "(steps_per_tick integration steps, one JointState). Reset restores the "
                "scene's initial state; stamps and /clock keep increasing.")

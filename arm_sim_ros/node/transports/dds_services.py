@@ -35,7 +35,12 @@ from .. import parameter_services as ps
 from ..ros_args import full_node_name
 from ..wire_errors import check_topic_name
 from . import dds_service_types as t
-from .dds_simulation import ROS_TYPE_NAMES, TYPE_HASHES, DdsSimulation
+from . import dds_action, dds_simulation
+from .dds_simulation import DdsSimulation
+
+# every service and topic type served here: its ROS name and RIHS01 hash
+ROS_TYPE_NAMES = t.ROS_TYPE_NAMES | dds_simulation.ROS_TYPE_NAMES | dds_action.ROS_TYPE_NAMES
+TYPE_HASHES = t.TYPE_HASHES | dds_simulation.TYPE_HASHES | dds_action.TYPE_HASHES
 
 REPLY_WAIT = 2.0          # s a reply waits for its client's reply reader to be matched
 PARAMETERS_DEPTH = 1000   # rmw_qos_profile_parameters / rmw_qos_profile_parameter_events
@@ -45,8 +50,7 @@ _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 def endpoint_qos(message_type, depth: int, user_data: str = "") -> Qos:
     """rmw_cyclonedds' create_readwrite_qos for reliable, volatile, keep-last `depth`."""
-    name = t.ROS_TYPE_NAMES.get(message_type) or ROS_TYPE_NAMES[message_type]
-    typehash = t.TYPE_HASHES.get(name) or TYPE_HASHES[name]
+    typehash = TYPE_HASHES[ROS_TYPE_NAMES[message_type]]
     return Qos(Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
                Policy.Durability.Volatile, Policy.History.KeepLast(depth),
                Policy.WriterDataLifecycle(autodispose=False),
@@ -118,6 +122,8 @@ class ServiceEndpoint:
                 if log is not None:
                     log.error(f"{self.name}: request {request.seq} not answered: {error!r}")
                 continue
+            if fields is None:           # answered later (an action's result: reply_later)
+                continue
             reply = self.reply_type(guid=request.guid, seq=request.seq, **fields)
             answered.append((reply, request.sample_info.publication_handle))
         return answered
@@ -172,7 +178,9 @@ class DdsServices:
         )
         # the Simulation Interfaces, under the node's namespace (not ~/): dds_simulation.py
         self.simulation = DdsSimulation()
-        services = [(f"~/{name}", *rest) for name, *rest in services] + self.simulation.services()
+        self.action = dds_action.DdsSimulateSteps(participant, resolve, clock_ns)
+        services = ([(f"~/{name}", *rest) for name, *rest in services]
+                    + self.simulation.services() + self.action.services())
         self.endpoints = [
             ServiceEndpoint(participant, check_topic_name(resolve(service), "service name"),
                             request, reply, handler,
@@ -192,12 +200,15 @@ class DdsServices:
 
     @property
     def writers(self) -> list:
-        return [self.events_writer] + [endpoint.writer for endpoint in self.endpoints]
+        return ([self.events_writer] + [endpoint.writer for endpoint in self.endpoints]
+                + self.action.writers)
 
     def attach(self, core, control=None) -> None:
         """Serve `core`'s parameters; announce them as new, as rclpy does when it declares them.
         `control`: the SimulationControl the Simulation Interfaces drive."""
         self.core, self.simulation.control = core, control
+        if control is not None:
+            self.action.attach(control, self.reply_later)
         self.log = core.log if self.log is None else self.log
         self.parameters = ps.ParameterServices(core, self.log, self._publish_event)
         self._publish_event(new=[spec.name for spec in ps.PARAMETERS])
@@ -205,7 +216,9 @@ class DdsServices:
     # the loop ---------------------------------------------------------------------------
 
     def poll(self) -> int:
-        """Answer every request waiting and retry pending replies; returns replies sent."""
+        """Answer every request waiting and retry pending replies; returns replies sent. A
+        SimulateSteps goal executing takes one tick first (dds_action.py)."""
+        self.action.advance()
         if not self.pending and not self.waitset.wait(0):
             return 0
         now = time.monotonic()
@@ -230,9 +243,16 @@ class DdsServices:
         """Wait `seconds` (wall time), answering requests as they arrive."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
-            wait = min(left, 0.005 if self.pending else WAIT_SLICE)   # signals between waits
+            wait = min(left, 0.0 if self.action.busy else 0.005 if self.pending
+                       else WAIT_SLICE)                             # signals between waits
             self.waitset.wait(duration(seconds=wait))
             self.poll()
+
+    def reply_later(self, service: str, reply, request) -> None:
+        """Send `reply` to the client of `request`, taken earlier, once its reader matches."""
+        endpoint = next(e for e in self.endpoints if e.name.endswith(service))
+        self.pending.append((endpoint, reply, request.sample_info.publication_handle,
+                             time.monotonic() + REPLY_WAIT))
 
     def close(self) -> None:
         for endpoint in self.endpoints:

@@ -3,8 +3,8 @@ the wire as rmw_cyclonedds serves them: the same layout as the parameter service
 (dds_services.py: `rq/<name>Request` / `rr/<name>Reply`, the request header, USER_DATA
 with the RIHS01 type hash), the types as rosidl generates them from the package's .msg and
 .srv files. Served under the node's namespace: get_simulator_features,
-get_simulation_state, set_simulation_state, step_simulation, reset_simulation. The
-SimulateSteps action is not served. (No `from __future__ import annotations`: cyclonedds
+get_simulation_state, set_simulation_state, step_simulation, reset_simulation; the
+SimulateSteps action: dds_action.py. (No `from __future__ import annotations`: cyclonedds
 resolves field types at runtime.)
 """
 

@@ -1,13 +1,21 @@
 """The ROS 2 Simulation Interfaces on rclpy: served when the `simulation_interfaces` package
-imports (ros-jazzy-simulation-interfaces), else one line says so. The same services and
-names as on dds (dds_simulation.py), over the same SimulationControl (simulation.py)."""
+imports (ros-jazzy-simulation-interfaces), else one line says so. The same services, action
+and names as on dds (dds_simulation.py, dds_action.py), over the same SimulationControl
+(simulation.py) and the same rules for SimulateSteps goals (simulate_steps.py); rclpy's
+ActionServer keeps the goals."""
 from __future__ import annotations
+
+from ..simulate_steps import canceled, interrupted, refusal
+from ..simulation import RESULT_OK
 
 
 def serve(node, control) -> list:
-    """Create the services on `node` (under its namespace); [] without the package."""
+    """Create the services and the action on `node` (under its namespace); [] without the
+    package."""
     try:
+        from rclpy.action import ActionServer, CancelResponse
         from simulation_interfaces import srv
+        from simulation_interfaces.action import SimulateSteps
         from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
     except ImportError:
         node.get_logger().info("simulation_interfaces is not installed: the Simulation "
@@ -40,4 +48,49 @@ def serve(node, control) -> list:
                             answer(lambda request: control.step(request.steps))),
         node.create_service(srv.ResetSimulation, "reset_simulation",
                             answer(lambda request: control.reset(request.scope))),
+        ActionServer(node, SimulateSteps, "simulate_steps",
+                     execute_callback=executor(control, SimulateSteps, Result),
+                     cancel_callback=lambda goal_handle: CancelResponse.ACCEPT),
     ]
+
+
+class Turn:
+    """Awaited in a coroutine rclpy's executor runs: it takes other callbacks (a cancel)
+    before the coroutine goes on."""
+
+    def __await__(self):
+        yield
+
+
+def executor(control, action, result_type):
+    """SimulateSteps' execute callback: a tick, its feedback, a turn of the executor; a goal
+    that cannot run (simulate_steps.refusal) is aborted saying why."""
+    running = []
+
+    async def execute(goal_handle):
+        steps, done = goal_handle.request.steps, 0
+        code, message = refusal(control, steps, bool(running)) or (RESULT_OK, "")
+        if code == RESULT_OK:
+            running.append(goal_handle)
+            try:
+                while done < steps and not goal_handle.is_cancel_requested:
+                    code, why = control.step(1)
+                    if code != RESULT_OK:           # set playing meanwhile
+                        message = interrupted(done, steps, why)
+                        break
+                    done += 1
+                    goal_handle.publish_feedback(action.Feedback(completed_steps=done,
+                                                                 remaining_steps=steps - done))
+                    await Turn()
+            finally:
+                running.remove(goal_handle)
+        if code != RESULT_OK:
+            goal_handle.abort()
+        elif done < steps:
+            goal_handle.canceled()
+            message = canceled(done, steps)
+        else:
+            goal_handle.succeed()
+        return action.Result(result=result_type(result=code, error_message=message))
+
+    return execute
