@@ -1,5 +1,6 @@
-"""Discrete joint servos (servo.rate, effects/servo.py): samples on the steps from t = 0, the
-torque held between them, RK4's order kept, the books closed, bumpless switches, refusals."""
+"""Discrete joint servos (servo.rate, effects/servo.py): samples from t = 0 (a step split at
+those inside it), the torque held between them, RK4's order kept, the books closed, the
+error estimate, bumpless switches, refusals."""
 from __future__ import annotations
 
 import pytest
@@ -133,18 +134,49 @@ def test_switching_interface_live_with_a_rate_is_bumpless(switch, rates, when):
 
 
 @pytest.mark.parametrize("rate, step_size, message", [
-    (300.0, 1e-3, "servo.rate = 300 Hz does not sample on the steps of 0.001 s (1/rate must "
-                  "be a whole number of steps); rates that do: 333.333, 250 Hz"),
-    (2000.0, 1e-3, "servo.rate = 2000 Hz does not sample on the steps of 0.001 s"),
+    (2e5, 1e-3, "servo.rate = 200000 Hz samples 200 times in each step of 0.001 s, each "
+                "splitting it; at most 100: lower the rate or the step_size"),
     (0.0, 1e-3, "servo.rate = 0 is impossible: it must be positive (Hz)"),
     (-100.0, 1e-3, "servo.rate = -100 is impossible"),
     ("fast", 1e-3, "servo.rate must be a number (Hz)"),
     (1e-12, 1e-3, "servo.rate = 1e-12 Hz samples less than once in 1e9 steps"),
 ])
-def test_rates_that_do_not_fall_on_the_steps_are_refused_in_one_line(rate, step_size, message):
+def test_impossible_rates_are_refused_in_one_line(rate, step_size, message):
     with pytest.raises(SceneError) as refused:
         reach(rate, step_size=step_size)
     assert message in str(refused.value) and "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("rate, split, whole", [(300.0, 1e-3, 1 / 3000), (1000.0, 1e-2, 1e-3),
+                                                (150.0, 1e-2, 1 / 1500)],
+                         ids=["300 Hz in 1 ms steps", "1 kHz in 10 ms steps",
+                              "150 Hz in 10 ms steps"])
+def test_samples_inside_a_step_split_it_there(rate, split, whole):
+    # The same servo with its samples inside the steps (the step split at each) and on step
+    # boundaries (steps a whole fraction of its period): the same motion, to RK4's accuracy.
+    def final(h):
+        sim = Simulator(reach(rate, step_size=h, initial_velocities=(2.0, -3.0)))
+        sim.run(1.0)
+        return sim.state[0:4], sim.residual()
+
+    (inside, residual), (boundary, _) = final(split), final(whole)
+    assert max(abs(a - b) for a, b in zip(inside, boundary)) < 1e-8
+    assert abs(residual) < 1e-6
+
+
+def test_the_torque_changes_at_the_samples_inside_a_step_and_is_held_between():
+    sim = Simulator(reach(300.0))            # samples at k/300 s: inside steps of 1 ms
+    joint_servo = servo_of(sim.dynamics)
+    assert joint_servo.samples_in(0) == (True, [])
+    at_start, inside = joint_servo.samples_in(3)       # 3 ms to 4 ms: the sample at 10/3 ms
+    assert not at_start and inside == pytest.approx([1 / 300 - 3e-3])
+    assert joint_servo.samples_in(10) == (True, [])     # 10 ms = 3/300 s: on the boundary
+    held = []
+    for _ in range(30):
+        sim.step()
+        held.append(sim.joint_torque())
+    changes = [n for n in range(1, 30) if held[n] != held[n - 1]]
+    assert changes == [3, 6, 10, 13, 16, 20, 23, 26]   # the steps that hold a sample
 
 
 def test_a_continuous_servo_builds_the_code_it_built_before():
@@ -158,11 +190,12 @@ def test_batch_rollouts_refuse_a_discrete_servo_in_one_line():
         Batch(reach(100.0), count=2)
 
 
-def test_the_global_error_estimate_follows_a_discrete_servo_within_a_factor_of_ten():
+@pytest.mark.parametrize("rate", [100.0, 300.0], ids=["on the steps", "inside the steps"])
+def test_the_global_error_estimate_follows_a_discrete_servo_within_a_factor_of_ten(rate):
     # The shadow (shadow.py) samples its own state: the true motion's servo sees the true
     # state. Sampled the motion's instead, it drifted open-loop to 9e-2 rad in 4 s.
     def run(h):
-        sim = Simulator(reach(100.0, step_size=h, effort_limits=(120.0, 60.0)))
+        sim = Simulator(reach(rate, step_size=h, effort_limits=(120.0, 60.0)))
         every, states = round(1e-3 / h), []
         for n in range(round(2.0 / h)):
             sim.step()

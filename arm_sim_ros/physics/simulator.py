@@ -182,12 +182,11 @@ class Simulator:
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
             return
-        if self.sampled is not None and self.steps % self.sampled.every == 0:
-            servo.sample(self)      # a discrete servo samples, on its grid from t = 0
         books = self.accuracy       # plain planned steps until a check is due: no wrapper
-        try:
-            y = (books.plain if self.steps < books.due else books.check)(
-                self._rhs, self.state, self.step_size)
+        take = books.plain if self.steps < books.due else books.check
+        try:    # a discrete servo: the step split at its samples, each taken there
+            y = take(self._rhs, self.state, self.step_size) if self.sampled is None else \
+                servo.sampled_step(self, take)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
             self._refuse(f"cannot be taken: {model.arithmetic_fault(error)}")
         else:

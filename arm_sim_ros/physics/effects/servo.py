@@ -28,12 +28,14 @@ With a `rate` (Hz) the servo is a discrete controller with zero-order hold: at e
 t_k = k T (T = 1/rate, from t = 0) it reads q, q̇ and the set-points, computes τ_k by the
 same law (the derivative term on the sampled velocity, as above), holds it until t_k+1, and
 steps its integral by forward Euler, wᵢ += T (kiᵢ eᵢ + bᵢ (τᵢ − rᵢ + clamp(wᵢ) − wᵢ)) (the
-discrete back-calculation). Samples fall on step boundaries (T a whole number of steps, else
-the scene is refused), so within a step the torque is a constant and RK4 keeps its order;
-the integrals stay in the state (their rate 0 between samples) and the held torque is the
-`work` as before.
+discrete back-calculation). A sample inside a step splits the step there (sampled_step), so
+within each piece the torque is a constant and RK4 keeps its order; the integrals stay in
+the state (their rate 0 between samples) and the held torque is the `work` as before.
 """
 from __future__ import annotations
+
+from fractions import Fraction
+from math import ceil, isfinite
 
 from ..model import ParameterError
 from ..stability import worst_stiffness
@@ -41,6 +43,7 @@ from .actuator import Actuator
 from .base import Parameter
 
 INTERFACES = ("position", "velocity", "effort")
+MAX_SAMPLES_PER_STEP = 100   # a discrete servo's samples in one step, each splitting it
 SERVO_POLICIES = ("setpoint", "command", "command_gravity_compensation")
 
 
@@ -61,7 +64,7 @@ class Servo(Actuator):
                   description="anti-windup back-calculation rate (none = ki/kp)"),
         Parameter("rate", "float", "Hz", "positive", default=None,
                   description="sample rate of a discrete servo with zero-order hold "
-                              "(none = continuous); 1/rate a whole number of steps"),
+                              "(none = continuous)"),
     )
 
     def __init__(self, interface=("position", "position"), kp=(0.0, 0.0), ki=(0.0, 0.0),
@@ -90,13 +93,11 @@ class Servo(Actuator):
             for i, (kind, value) in enumerate(zip(interface, setpoint)):
                 self.setpoint[{"position": 0, "velocity": 2, "effort": 4}[kind] + i] = value
         self.state = ("integral1", "integral2")
-        # a discrete servo: a sample every `every` steps (the scene's: step_size known), the
-        # torque held since the latest
+        # a discrete servo (the scene's: step_size known): its grid, the torque it holds
         timed = rate is not None and step_size is not None
-        self.rate, self.every, self.held = rate, sample_steps(rate, step_size) if timed \
-            else None, [0.0, 0.0]
+        self.rate, self.held, self.period = rate, [0.0, 0.0], 1.0 / rate if rate else None
+        self.every, self.grid = sample_grid(rate, step_size) if timed else (None, None)
         self.shadow_held = [0.0, 0.0]    # what it holds in the error books' shadow (shadow.py)
-        self.period = self.every * step_size if timed else None
 
     def constants(self, arm) -> dict:
         out = {"command": self.command, "SP": self.setpoint} | (
@@ -193,6 +194,18 @@ class Servo(Actuator):
                 state[4 + i] += self.period * (self.ki[i] * e + back)
         return tuple(state)
 
+    def samples_in(self, n: int) -> tuple[bool, list]:
+        """(whether a sample falls at the start of step n, the offsets in s from that start
+        of those inside it); exact: rate and step size as the decimals they were written."""
+        if self.every is not None:                     # a whole number of steps per sample
+            return n % self.every == 0, []
+        h, rate = self.grid
+        start = n * h * rate                           # in sample periods
+        first = ceil(start)
+        inside = [float(k / rate - n * h)
+                  for k in range(first + (first == start), ceil((n + 1) * h * rate))]
+        return first == start, inside
+
     def beside(self, advance, f, z, h):
         """advance(f, z, h) under the shadow's held torque: the shadow follows the true motion,
         whose servo samples the true state, not the motion's."""
@@ -228,38 +241,53 @@ class Servo(Actuator):
         return tuple(integrals)
 
 
-def sample_steps(rate: float, step_size: float) -> int:
-    """Steps per sample of a servo at `rate`: its samples fall on step boundaries (a sample
-    inside a step would change the torque there, and RK4 would lose its order), else one
-    line saying which rates fit."""
+def sample_grid(rate: float, step_size: float) -> tuple:
+    """(steps per sample when that is a whole number, else None; (step size, rate) as exact
+    fractions of the decimals they were written as), or one line refusing the rate."""
     if not rate * step_size >= 1e-9:
         raise ParameterError(f"servo.rate = {rate:g} Hz samples less than once in 1e9 steps "
                              f"of {step_size:g} s; leave it out for a continuous servo")
-    steps = round(1.0 / (rate * step_size))
-    if steps < 1 or abs(steps * rate * step_size - 1.0) > 1e-9:
-        fits = ", ".join(f"{1.0 / (m * step_size):g}" for m in range(
-            max(1, int(1.0 / (rate * step_size))), int(1.0 / (rate * step_size)) + 2))
-        raise ParameterError(f"servo.rate = {rate:g} Hz does not sample on the steps of "
-                             f"{step_size:g} s (1/rate must be a whole number of steps); "
-                             f"rates that do: {fits} Hz")
-    return steps
+    if rate * step_size > MAX_SAMPLES_PER_STEP:
+        raise ParameterError(f"servo.rate = {rate:g} Hz samples {rate * step_size:g} times in "
+                             f"each step of {step_size:g} s, each splitting it; at most "
+                             f"{MAX_SAMPLES_PER_STEP}: lower the rate or the step_size")
+    h, rate = (Fraction(v).limit_denominator(10**9) for v in (step_size, rate))
+    per_sample = 1 / (h * rate)
+    return (int(per_sample) if per_sample.denominator == 1 else None), (h, rate)
 
 
-def sample(sim) -> None:
-    """The discrete servo's sample at the start of a step on its grid (t = k/rate): the torque
-    it holds through the next 1/rate s, and its integrals stepped in the state (a state the
-    switching stepper still follows: only integrals changed, which no mode and no right-hand
-    side of a discrete servo reads). The error books' shadow samples its own state."""
-    joint_servo, shadow, before = sim.sampled, sim.accuracy.shadow, sim.state
-    sim.state = joint_servo.sample(before, joint_servo.held)
-    if sim.switching is not None and sim.switching.last is before:
-        sim.switching.last = sim.state
-    z = shadow.start(before)
+def sampled_step(sim, take):
+    """take(f, y, h) over the simulator's next step, split at the discrete servo's samples in
+    it, each taken there; one at the step's start first. Within each piece the torque is a
+    constant and RK4 keeps its order."""
+    at_start, inside = sim.sampled.samples_in(sim.steps)
+    if at_start:
+        sim.state = sample(sim, sim.state)
+    y, done = sim.state, 0.0
+    for offset in inside:
+        y = take(sim._rhs, y, offset - done)
+        if not all(isfinite(v) for v in y):   # the simulator refuses the step: no sample
+            return y
+        y, done = sample(sim, y), offset
+    return take(sim._rhs, y, sim.step_size - done)
+
+
+def sample(sim, y) -> tuple:
+    """The discrete servo's sample at state y: the torque it holds until its next, and y with
+    its integrals stepped (a state the switching stepper still follows: only integrals
+    changed, which no mode and no right-hand side of a discrete servo reads). The error
+    books' shadow samples its own state."""
+    joint_servo, shadow = sim.sampled, sim.accuracy.shadow
+    sampled = joint_servo.sample(y, joint_servo.held)
+    if sim.switching is not None and sim.switching.last is y:
+        sim.switching.last = sampled
+    z = shadow.start(y)
     if z is None:                  # not followed (yet): the shadow is the motion
         joint_servo.shadow_held[:] = joint_servo.held
     else:
-        shadow.shadow, shadow.last = joint_servo.sample(z, joint_servo.shadow_held), sim.state
+        shadow.shadow, shadow.last = joint_servo.sample(z, joint_servo.shadow_held), sampled
     shadow.sampled = joint_servo
+    return sampled
 
 
 def sampled(dynamics) -> Servo | None:
