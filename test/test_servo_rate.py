@@ -207,3 +207,17 @@ def test_the_global_error_estimate_follows_a_discrete_servo_within_a_factor_of_t
     reference, _ = run(1.25e-4)
     true = max(abs(a - b) for s, r in zip(motion, reference) for a, b in zip(s, r))
     assert true / 10 < estimate < true * 10
+
+
+def test_a_discrete_servo_with_friction_limits_and_windings_closes_its_books():
+    # Switches located inside the pieces the samples make (events.py), a saturating driver.
+    sim = Simulator(reach(300.0, friction={"coulomb": [2.0, 1.0], "static": [3.0, 1.5]},
+                          joint_limits={"lower": [-0.2, -0.25], "upper": [1.0, 1.0]},
+                          motors=WINDINGS | {"voltage_limit": [10.0, 10.0]}))
+    largest = 0.0
+    for _ in range(1500):
+        sim.step()
+        largest = max(largest, abs(sim.residual()))
+    inputs, losses = sim.books(sim.state)
+    assert sim.fault is None and sum(sim.switch_events.values()) > 0
+    assert largest <= 1e-6 * max(1.0, abs(sim.energy(sim.state)), abs(inputs), abs(losses))
