@@ -16,8 +16,9 @@ from arm_sim_ros.node import simulate_steps as a
 from arm_sim_ros.node import simulation as s
 from arm_sim_ros.node.transports import dds_action as d
 from arm_sim_ros.node.transports import dds_simulation
+from arm_sim_ros.tools.sim_client import SimulationClient
 from test_dds_services import Client, start
-from test_node_dds import wait_until
+from test_node_dds import CONFIG, wait_until
 from test_simulation_interfaces import read, readers, sim_client
 
 # The definitions the hashes cover (fields only): SimulateSteps.action (simulation_interfaces,
@@ -204,3 +205,17 @@ def test_features_list_the_action():
     node, peer = start(153)
     reply = sim_client(peer, "get_simulator_features").call(node)
     assert s.STEP_SIMULATION_ACTION in reply.features.features
+
+
+def test_the_harness_client_runs_the_action():
+    node, _ = start(154, scene="servo_hold")
+    harness = SimulationClient(domain_id=154, config=CONFIG, serve=node.services.poll)
+    harness.wait_for_node()
+    assert harness.pause() == s.RESULT_OK
+    before = node.core.sim.steps
+    assert harness.simulate(20) == (a.STATUS_SUCCEEDED, s.RESULT_OK, "")
+    assert node.core.sim.steps == before + 20 * node.core.config.steps_per_tick
+    assert len(harness.received_joint_states()) >= 20
+    assert harness.play() == s.RESULT_OK
+    status, code, message = harness.simulate(5)
+    assert (status, code) == (a.STATUS_ABORTED, s.RESULT_OPERATION_FAILED) and "paused" in message

@@ -1,11 +1,12 @@
 """A test harness's client of the node's Simulation Interfaces on the dds transport, with no
-ROS installed: each service called on the wire as an rmw_cyclonedds client calls it
-(node/transports/dds_services.py tells the layout), set-point commands published and
-acknowledged, and the node's joint_states read. Against rclpy, call the same services with
-simulation_interfaces' types."""
+ROS installed: each service (the SimulateSteps action's too) called on the wire as an
+rmw_cyclonedds client calls it (node/transports/dds_services.py tells the layout), set-point
+commands published and acknowledged, and the node's joint_states read. Against rclpy, call
+the same services with simulation_interfaces' types."""
 from __future__ import annotations
 
 import time
+import uuid
 
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -15,6 +16,7 @@ from cyclonedds.util import duration
 from ..interface import SETPOINT_TOPICS
 from ..node import messages as msg
 from ..node import simulation as s
+from ..node.transports import dds_action as a
 from ..node.transports import dds_simulation as d
 from ..node.transports.dds_services import cs_id, endpoint_qos
 
@@ -30,8 +32,9 @@ class SimulationClient:
                  namespace: str = "", serve=None):
         self.participant = p = msg.make_participant(domain_id, config)
         self.serve = serve or (lambda: None)
+        kinds = {name: (request, response) for name, (_, request, response) in d.TYPES.items()}
         self.services = {name: _Service(p, f"{namespace}/{name}", request, response, k + 1)
-                         for k, (name, (_, request, response)) in enumerate(d.TYPES.items())}
+                         for k, (name, (request, response)) in enumerate((kinds | a.TYPES).items())}
         self.commands = {field: DataWriter(p, Topic(p, msg.ros_topic(f"{namespace}/{topic}"),
                                                     msg.Float64MultiArray),
                                            qos=msg.default_qos(msg.Float64MultiArray))
@@ -71,6 +74,15 @@ class SimulationClient:
     def step(self, ticks: int) -> int:
         return self.call("step_simulation", steps=ticks).result.result
 
+    def simulate(self, ticks: int, timeout: float = TIMEOUT) -> tuple[int, int, str]:
+        """The SimulateSteps action: a goal of `ticks`, its end waited for (up to `timeout`
+        s); (its status, as action_msgs/GoalStatus has it, result code, message)."""
+        goal_id = a.UUID(list(uuid.uuid4().bytes))
+        self.call(a.SERVICES[0], goal_id=goal_id, goal=a.Goal(ticks))
+        reply = self._until(self.services[a.SERVICES[2]].ask(goal_id=goal_id),
+                            "the SimulateSteps result", timeout)
+        return reply.status, reply.result.result.result, reply.result.result.error_message
+
     def command(self, field: str, values) -> None:
         """[joint 1, joint 2] on position_commands or velocity_commands (`field`), held by the
         node once this returns (acknowledged): a step asked for after it acts under it."""
@@ -83,15 +95,15 @@ class SimulationClient:
         self.serve()
         return [m for m in self.joint_states.take(N=100_000) if isinstance(m, msg.JointState)]
 
-    def _until(self, found, what: str):
-        deadline = time.monotonic() + TIMEOUT
+    def _until(self, found, what: str, timeout: float = TIMEOUT):
+        deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.serve()
             value = found()
             if value:
                 return value
             time.sleep(0.0005)
-        raise TimeoutError(f"{what} did not come within {TIMEOUT:g} s")
+        raise TimeoutError(f"{what} did not come within {timeout:g} s")
 
 
 class _Service:

@@ -139,6 +139,9 @@ class CancelGoalResponse(IdlStruct, typename="action_msgs.srv.dds_.CancelGoal_Re
 ACTION = "simulate_steps"
 PREFIX = f"{ACTION}/_action/"
 SERVICES = tuple(PREFIX + name for name in ("send_goal", "cancel_goal", "get_result"))
+TYPES = dict(zip(SERVICES, ((SendGoalRequest, SendGoalResponse),
+                            (CancelGoalRequest, CancelGoalResponse),
+                            (GetResultRequest, GetResultResponse))))   # service: its types
 ROS_TYPE_NAMES = {
     SendGoalRequest: "simulation_interfaces/action/SimulateSteps_SendGoal_Request",
     SendGoalResponse: "simulation_interfaces/action/SimulateSteps_SendGoal_Response",
@@ -206,9 +209,8 @@ class DdsSimulateSteps:
 
     def services(self) -> list:
         """(service, request type, response type, handler) for DdsServices."""
-        return list(zip(SERVICES, (SendGoalRequest, CancelGoalRequest, GetResultRequest),
-                        (SendGoalResponse, CancelGoalResponse, GetResultResponse),
-                        (self._send_goal, self._cancel, self._result)))
+        handlers = (self._send_goal, self._cancel, self._result)
+        return [(name, *TYPES[name], handler) for name, handler in zip(SERVICES, handlers)]
 
     def attach(self, control, reply_later) -> None:
         """`reply_later(service, reply, request)`: send `reply` to the client of `request`."""
