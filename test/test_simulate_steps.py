@@ -219,3 +219,11 @@ def test_the_harness_client_runs_the_action():
     assert harness.play() == s.RESULT_OK
     status, code, message = harness.simulate(5)
     assert (status, code) == (a.STATUS_ABORTED, s.RESULT_OPERATION_FAILED) and "paused" in message
+
+
+def test_a_closed_node_leaves_with_its_action_topics():
+    node, peer, _ = paused_node(155)
+    client = ActionClient(node, peer)
+    node.close()
+    wait_until(lambda: not msg.matched(client.status) and not msg.matched(client.feedback),
+               "the action's writers still matched after close")

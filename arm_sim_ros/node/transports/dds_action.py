@@ -216,6 +216,12 @@ class DdsSimulateSteps:
         """`reply_later(service, reply, request)`: send `reply` to the client of `request`."""
         self.goals, self.reply_later = steps.StepsGoals(control, self.clock_ns), reply_later
 
+    def close(self) -> None:
+        """Leave the graph: no goal goes on, the writers go (cyclonedds deletes an entity when
+        its last reference goes)."""
+        self.goals = self.feedback_writer = self.status_writer = None
+        self.waiting = {}
+
     @property
     def busy(self) -> bool:
         return self.goals is not None and self.goals.active() is not None

@@ -259,6 +259,7 @@ class DdsServices:
             self.waitset.detach(endpoint.condition)
         self.endpoints, self.pending = [], []
         self.waitset = self.events_writer = None
+        self.action.close()
 
     # handlers: request -> the reply's fields -----------------------------------------------
 
