@@ -186,7 +186,7 @@ class Simulator:
         take = books.plain if self.steps < books.due else books.check
         try:    # a discrete servo: the step split at its samples, each taken there
             y = take(self._rhs, self.state, self.step_size) if self.sampled is None else \
-                servo.sampled_step(self, take)
+                servo.sampled_step(self, take, self._rhs)
         except (ValueError, OverflowError, ZeroDivisionError) as error:  # cos(inf), inf ** 2
             self._refuse(f"cannot be taken: {model.arithmetic_fault(error)}")
         else:

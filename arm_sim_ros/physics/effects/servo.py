@@ -256,7 +256,7 @@ def sample_grid(rate: float, step_size: float) -> tuple:
     return (int(per_sample) if per_sample.denominator == 1 else None), (h, rate)
 
 
-def sampled_step(sim, take):
+def sampled_step(sim, take, f):
     """take(f, y, h) over the simulator's next step, split at the discrete servo's samples in
     it, each taken there; one at the step's start first. Within each piece the torque is a
     constant and RK4 keeps its order."""
@@ -265,11 +265,11 @@ def sampled_step(sim, take):
         sim.state = sample(sim, sim.state)
     y, done = sim.state, 0.0
     for offset in inside:
-        y = take(sim._rhs, y, offset - done)
+        y = take(f, y, offset - done)
         if not all(isfinite(v) for v in y):   # the simulator refuses the step: no sample
             return y
         y, done = sample(sim, y), offset
-    return take(sim._rhs, y, sim.step_size - done)
+    return take(f, y, sim.step_size - done)
 
 
 def sample(sim, y) -> tuple:
