@@ -7,7 +7,7 @@ import pytest
 
 from arm_sim_ros.physics.batch import Batch
 from arm_sim_ros.physics.effects.servo import change_scene, servo_of
-from arm_sim_ros.physics.scene import Scene, SceneError
+from arm_sim_ros.physics.scene import Scene, SceneError, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 
 GAINS = {"kp": [200.0, 100.0], "ki": [300.0, 150.0], "kd": [30.0, 10.0]}
@@ -221,3 +221,18 @@ def test_a_discrete_servo_with_friction_limits_and_windings_closes_its_books():
     inputs, losses = sim.books(sim.state)
     assert sim.fault is None and sum(sim.switch_events.values()) > 0
     assert largest <= 1e-6 * max(1.0, abs(sim.energy(sim.state)), abs(inputs), abs(losses))
+
+
+@pytest.mark.parametrize("rate, said", [(140.0, True), (160.0, False)])
+def test_a_rate_too_slow_for_the_velocity_gains_is_said_in_one_line(rate, said):
+    # servo_hold's kd (52, 17 N m s/rad) held for T through M(q)⁻¹ reaches 2 at 153.8 Hz:
+    # below, the sampled loop limit-cycles; above, it settles.
+    sim = Simulator(load_scene("servo_hold").with_text_overrides([f"servo.rate={rate}"]))
+    warnings = [e.message for e in sim.events if e.kind == "servo"]
+    assert len(warnings) == said and all("\n" not in w for w in warnings)
+    if said:
+        assert "raise the rate above 153.8 Hz or lower the gains" in warnings[0]
+    joint_servo = servo_of(sim.dynamics)
+    joint_servo.setpoint[0:2] = [0.8, -0.2]
+    sim.run(3.0)
+    assert (abs(sim.state[0] - 0.8) > 1e-3) == said

@@ -283,6 +283,8 @@ def steppers(sim: Simulator, scene: Scene) -> None:
     sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
     sim.path = getattr(step, "path", "python")
     sim.sampled = servo.sampled(sim.dynamics)    # a discrete servo (its rate), or None
+    if sim.sampled is not None and (risk := servo.sampling_risk(sim.sampled, sim.arm)):
+        sim._emit("servo", risk)
     sim.accuracy = books_for(sim, scene, step)   # the planned step, its error checked
 
 

@@ -35,9 +35,9 @@ the state (their rate 0 between samples) and the held torque is the `work` as be
 from __future__ import annotations
 
 from fractions import Fraction
-from math import ceil, isfinite
+from math import ceil, isfinite, pi, sqrt
 
-from ..model import ParameterError
+from ..model import ParameterError, mass_matrix
 from ..stability import worst_stiffness
 from .actuator import Actuator
 from .base import Parameter
@@ -254,6 +254,26 @@ def sample_grid(rate: float, step_size: float) -> tuple:
     h, rate = (Fraction(v).limit_denominator(10**9) for v in (step_size, rate))
     per_sample = 1 / (h * rate)
     return (int(per_sample) if per_sample.denominator == 1 else None), (h, rate)
+
+
+def sampling_risk(joint_servo: Servo, arm) -> str:
+    """'' or why a discrete servo's sampled loop diverges: its velocity feedback K (kd on a
+    position joint, kp on a velocity joint) held for a period T moves q̇ by T M(q)⁻¹ K q̇,
+    which overshoots for good once an eigenvalue passes 2 at some elbow angle."""
+    k = [kd if kind == "position" else kp if kind == "velocity" else 0.0
+         for kind, kp, kd in zip(joint_servo.interface, joint_servo.kp, joint_servo.kd)]
+    worst = 0.0
+    for n in range(65):              # M depends on cos q2 alone: q2 over [0, π]
+        m11, m12, m22 = mass_matrix(arm, (0.0, pi * n / 64))
+        det = m11 * m22 - m12 * m12  # M⁻¹ K: trace and determinant; real eigenvalues
+        trace, product = (m22 * k[0] + m11 * k[1]) / det, k[0] * k[1] / det
+        worst = max(worst, trace / 2 + sqrt(max(trace * trace / 4 - product, 0.0)))
+    if worst * joint_servo.period <= 2.0:
+        return ""
+    return (f"servo.rate = {joint_servo.rate:g} Hz samples too slowly for its velocity gains: "
+            f"T M(q)⁻¹ K reaches {worst * joint_servo.period:.3g} (beyond 2), so the sampled "
+            f"loop diverges or limit-cycles; raise the rate above {worst / 2:.4g} Hz or lower "
+            "the gains")
 
 
 def sampled_step(sim, take, f):
