@@ -311,8 +311,10 @@ def fired(guard, kinds, y) -> list:
 
 def impulse(stepper, y, mode, i, located) -> None:
     """Joint i arrives at a hard limit: q̇ᵢ -> −e q̇ᵢ by an impulse along it (a slow
-    bounce ends at rest); the other joint's velocity changes through M's coupling unless
-    it rests on a limit the impulse pushes it into. The kinetic energy lost is booked."""
+    bounce, or one past the step's quota, ends at rest); the other joint's velocity changes
+    through M's coupling unless it rests on a limit the impulse pushes it into (past the
+    quota: any limit it rests on, or two resting joints would kick each other off their
+    stops for ever). The kinetic energy lost is booked."""
     j, limits = 1 - i, stepper.limits
     v = y[2 + i]                                  # the stop it arrives at: a hair's gap
     upper = v > 0.0 if v else y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
@@ -323,17 +325,20 @@ def impulse(stepper, y, mode, i, located) -> None:
     m11, m12, m22 = model.mass_matrix(stepper.arm, y[:2])
     diagonal, other = (m11, m22) if i == 0 else (m22, m11)
     coupling = -m12 / other                       # Δq̇ⱼ / Δq̇ᵢ for an impulse along i
-    held = mode[j] in ("lower", "upper") and (coupling * -v > 0) == (mode[j] == "upper")
-    if held:                                      # both joints' stops take the impulse
+    held = mode[j] in ("lower", "upper") and (
+        stepper.plastic or (coupling * -v > 0) == (mode[j] == "upper"))
+    if held:                 # both joints' stops take the impulse (chatter: both rest)
         coupling, inverse = 0.0, 1.0 / diagonal
     else:
         inverse = other / (m11 * m22 - m12 * m12)   # (M⁻¹)ᵢᵢ
     change = -(1.0 + e) * v
     y[2 + i] = -e * v if e else 0.0
-    if coupling:
+    if coupling:              # the other joint moves (off its stop, if it pulls it away)
         y[2 + j] += coupling * change
-        if stepper.friction is not None and mode[j] not in ("lower", "upper"):
+        if stepper.friction is not None:
             mode[j] = "+" if y[2 + j] > 0 else "-" if y[2 + j] < 0 else "stuck"
+        elif mode[j] in ("lower", "upper"):
+            mode[j] = "free"
     if stepper.impact_at is not None:
         y[stepper.impact_at] += 0.5 * (1.0 - e * e) * v * v / inverse
     if e:
