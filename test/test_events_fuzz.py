@@ -172,7 +172,10 @@ def test_compliant_limits_enter_and_leave_as_the_reference_does(scene):
     expected = reference.states([0.0, 0.2])[-1]
     sim = Simulator(scene)
     sim.run(0.2)
-    assert sum(sim.switch_events.values()) == len(reference.switch_times)
+    # every entry and exit the reference finds, and no motion apart: solve_ivp reads its
+    # events at its own steps' ends, so a contact shorter than its step it can miss
+    # (an elbow 1e-3 rad from its stop at 46 rad/s, in and out within its first step)
+    assert sum(sim.switch_events.values()) >= len(reference.switch_times)
     # a stiff contact at the default tolerance: 9e-4 rad at 31 rad/s into k = 3e5 N m/rad
     assert max(abs(a - b) for a, b in zip(sim.state[:2], expected[:2])) < 1e-2
     assert sim.fault is None and books_off(sim) < BOOKS
