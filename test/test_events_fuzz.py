@@ -25,7 +25,8 @@ FUZZ = settings(max_examples=EXAMPLES, deadline=None,
                 derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
                 suppress_health_check=[HealthCheck.too_slow])
 PASSED = 1e-9          # rad: the most a hard limit may be passed
-BOOKS = 1e-5           # the balance residual, as a fraction of the energy in play
+BOOKS = 1e-4           # the balance residual, as a fraction of the energy in play: what
+                       # the default tolerance leaves (1e-5 after 0.2 s of a fast arm)
 
 
 def run_checked(scene, seconds):
