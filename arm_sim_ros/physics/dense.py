@@ -43,7 +43,7 @@ def _root(a: float, b: float, c: float) -> float:
     for s in ((-b - root) / (2.0 * a), (-b + root) / (2.0 * a)):
         if 0.0 <= s <= 1.0:
             return s
-    return 0.5
+    return 0.5                # rounding put both just outside: read the middle instead
 
 
 def between(y0, y1, dt: float, s: float) -> tuple:
