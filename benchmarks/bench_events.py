@@ -10,7 +10,10 @@ Tables printed (timings are wall-clock on whatever else the machine runs: noisy)
    reference here is the located run at h = 0.01 / 256 (test_friction_limits.py checks the
    same orders against an independent solve_ivp(events=...) reference);
 4. sub-steps a compliant limit takes while engaged, over k and h (0 switching cost while
-   no joint is beyond its limit).
+   no joint is beyond its limit);
+5. what reading the guards between a sub-step's ends costs (physics/dense.py: a mode that
+   ends and comes back within one sub-step), against reading them at its end only, the
+   two interleaved in one process.
 
     python benchmarks/bench_events.py [--quick]
 """
@@ -26,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchma
 
 from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
 
+from arm_sim_ros.physics import dense, events  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 
@@ -121,6 +125,37 @@ def substep_table() -> list[str]:
     return lines
 
 
+def end_only(step, rhs, guard, width, y0, y1, dt):
+    """dense.ended as it was: the guards at the sub-step's end only."""
+    values = guard(*y1[:width])
+    return None if not values or min(values) >= 0.0 else dt
+
+
+def dense_table(quick: bool) -> list[str]:
+    release = load_scene("release")
+    cases = [(name, load_scene(name), seconds) for name, seconds in
+             (("stick_slip", 6.0), ("limit_impact", 3.0), ("compliant_limit", 3.0))] + [
+        ("stuck at rest (friction)", release.replace(
+            initial_positions=(0.3, 0.5), friction={"coulomb": [15.0, 4.0], "static": [20.0, 6.0]}),
+         3.0),
+        ("swinging, limits never reached", release.replace(
+            joint_limits={"lower": [-10.0, -10.0], "upper": [10.0, 10.0]}), 3.0)]
+    lines = ["5. us per step: guards read at the sub-step's end only vs also between its ends",
+             f"{'scene':<34}{'end only':>10}{'between':>10}{'ratio':>7}"]
+    for label, scene, seconds in cases:
+        seconds = seconds / 2 if quick else seconds
+        best = {}
+        for _ in range(3):
+            for check in (end_only, dense.ended):
+                events.ended = check
+                cost, _ = per_step(scene, seconds, 1)
+                best[check] = min(best.get(check, cost), cost)
+        events.ended = dense.ended
+        lines.append(f"{label:<34}{best[end_only]:>10.1f}{best[dense.ended]:>10.1f}"
+                     f"{best[dense.ended] / best[end_only]:>7.2f}")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter timing runs")
@@ -129,6 +164,8 @@ def main() -> None:
     print("\n".join(convergence_table()))
     print()
     print("\n".join(substep_table()))
+    print()
+    print("\n".join(dense_table(args.quick)))
 
 
 if __name__ == "__main__":

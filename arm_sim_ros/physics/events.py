@@ -10,12 +10,17 @@ order; the effects' switching functions g (Effect.guards) say when a mode ends (
 
 A step is taken as before (the stability plan's equal sub-steps; more while a compliant
 limit is engaged, whose stiffness counts only then). After each sub-step the switching
-functions are evaluated; when one went negative the event is located by re-stepping from
-the sub-step's start with a shorter step (Illinois regula falsi, bracket < 1e-12 s), the
+functions are evaluated at its end and, where an angle turns or a velocity has an
+extremum inside it, between its ends (dense.py: a mode that ends and comes back within
+one sub-step); when one went negative the event is located by re-stepping from the
+sub-step's start with a shorter step (Illinois regula falsi, bracket < 1e-12 s), the
 switch is applied there (an impulse at an impact, q̇ᵢ = 0 exactly at a stop), and the step
 goes on from there in the new mode. It still ends exactly at the step boundary: the
-remaining time is re-split into equal sub-steps. `locate = False` switches at the end of
-the sub-step instead (first order; for the convergence test and benchmark).
+remaining time is re-split into equal sub-steps. Every switch is located; past
+MAX_EVENTS_PER_STEP in one step (Zeno chatter at a stop) impacts are plastic, so the joint
+comes to rest on its stop with the energy booked and settle() decides whether it stays.
+`locate = False` switches at the end of the sub-step instead (first order; for the
+convergence test and benchmark).
 """
 from __future__ import annotations
 
@@ -26,10 +31,12 @@ from . import model, stability
 from .clamps import KINDS as CLAMPS
 from .clamps import Clamps
 from .dynamics import mode_functions
+from .dense import ended
 from .effects import Effect
 
 TIME_TOLERANCE = 1e-12    # s: an event's time is known to this (the bracket's width)
-MAX_EVENTS_PER_STEP = 64  # beyond this (chattering) the rest of the step switches unlocated
+MAX_EVENTS_PER_STEP = 64  # beyond this (chattering) impacts are plastic: rest on the stop
+MAX_SWITCHES = 4096       # beyond this in one step the step is refused (never a hang)
 REST_SPEED = 1e-4         # rad/s: a bounce slower than this (e < 1) ends at rest on the limit
 CONTACT_RESOLUTION = 0.25  # h_sub |λ| while a compliant limit is engaged: ~12 sub-steps a swing
 STEEP = 4.0               # Stribeck velocities: within this a sliding joint's step is estimated
@@ -61,6 +68,8 @@ def switching(dynamics, tableau, step, substeps: int, emit, clock, counts=None):
 
 
 class Switching:
+    plastic = False          # impacts leave at rest (a step's switches passed the quota)
+
     def __init__(self, dynamics, tableau, step, substeps, emit, clock, counts=None):
         self.dynamics, self.arm, self.step, self.emit = dynamics, dynamics.arm, step, emit
         self.clock, self.counts = clock, Counter() if counts is None else counts
@@ -147,7 +156,7 @@ class Switching:
         engaged = self.mode[2] or self.mode[3] or steep(self, y)   # contact, or Stribeck's
         if self.substeps == 1 and not engaged:        # the common case
             y1 = self.step(rhs, y, h)
-            if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+            if not kinds or ended(self.step, rhs, guard, self.width, y, y1, h) is None:
                 if piece is not None:
                     piece(rhs, y, h, y1)
                 self.last = y1
@@ -163,7 +172,8 @@ class Switching:
             dt = remaining / count
             for k in range(count):
                 y1 = self.step(rhs, y, dt)
-                if not kinds or min(guard(*y1[:self.width])) >= 0.0:
+                cut = ended(self.step, rhs, guard, self.width, y, y1, dt) if kinds else None
+                if cut is None:
                     if piece is not None:
                         piece(rhs, y, dt, y1)
                     y = y1
@@ -171,8 +181,9 @@ class Switching:
                 if piece is None and self.checked is not None and not events:
                     return self.checked(f, start, h)   # a switch inside: estimate the step
                 elapsed = h - remaining + k * dt          # from the step's start
-                if self.locate and events < MAX_EVENTS_PER_STEP:
-                    t, y = self.locate_switch(rhs, guard, kinds, y, dt, elapsed, piece)
+                if self.locate:
+                    self.plastic = chattering(events)   # Zeno at a stop: rest on it
+                    t, y = locate(self, rhs, guard, kinds, y, cut, elapsed, piece)
                 else:
                     if piece is not None:
                         piece(rhs, y, dt, y1)
@@ -189,38 +200,6 @@ class Switching:
             self.extra_substeps += taken - (self.substeps if self.substeps > 1 else 0)
         self.last = y = tuple(y)
         return y
-
-    def locate_switch(self, rhs, guard, kinds, y0, dt, elapsed, piece=None):
-        """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
-        regula falsi on re-steps of length t from y0, to TIME_TOLERANCE; `piece` is told
-        the smooth re-step up to the switch."""
-        def g(t):
-            y = self.step(rhs, y0, t) if t > 0.0 else y0
-            return min(guard(*y[:self.width])), y
-
-        (ga, ya), (gb, yb) = g(0.0), g(dt)
-        a, b, side = 0.0, dt, 0
-        if ga < 0.0:                                  # already past (rounding): switch now
-            b, yb = 0.0, y0
-        for _ in range(200):
-            if b - a <= TIME_TOLERANCE:
-                break
-            t = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
-            if not a < t < b or side == 3:         # safeguard: bisect
-                t, side = 0.5 * (a + b), 0
-            gt, yt = g(t)
-            if gt < 0.0:
-                b, gb, yb = t, gt, yt
-                ga, side = (0.5 * ga, side + 1) if side > 0 else (ga, 1)
-            else:
-                a, ga, ya = t, gt, yt
-                gb, side = (0.5 * gb, side + 1) if side > 0 else (gb, 1)
-        switches = fired(guard, kinds, yb[:self.width])
-        impact = switches and switches[0][0] == "impact"   # arrive, not pass: the state before
-        t, y = (a, ya) if impact else (b, yb)
-        if piece is not None and t > 0.0:
-            piece(rhs, y0, t, y)
-        return t, self.apply(y, switches[:1] if impact else switches, at=elapsed + b)
 
     # --- switches ------------------------------------------------------------------------
 
@@ -250,7 +229,6 @@ class Switching:
             self.count(kind, i, at)
         return y
 
-
     def count(self, kind: str, joint: int, at) -> None:
         self.counts[kind] += 1
         self.total = total = self.total + 1
@@ -262,6 +240,39 @@ class Switching:
             self.emit("switch", f"{total} switches so far ({counts}); latest at t = {when}")
 
 
+def locate(stepper, rhs, guard, kinds, y0, dt, elapsed, piece=None):
+    """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
+    regula falsi on re-steps of length t from y0, to TIME_TOLERANCE; `piece` is told
+    the smooth re-step up to the switch."""
+    def g(t):
+        y = stepper.step(rhs, y0, t) if t > 0.0 else y0
+        return min(guard(*y[:stepper.width])), y
+
+    (ga, ya), (gb, yb) = g(0.0), g(dt)
+    a, b, side = 0.0, dt, 0
+    if ga < 0.0:                                  # already past (rounding): switch now
+        b, yb = 0.0, y0
+    for _ in range(200):
+        if b - a <= TIME_TOLERANCE:
+            break
+        t = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
+        if not a < t < b or side == 3:         # safeguard: bisect
+            t, side = 0.5 * (a + b), 0
+        gt, yt = g(t)
+        if gt < 0.0:
+            b, gb, yb = t, gt, yt
+            ga, side = (0.5 * ga, side + 1) if side > 0 else (ga, 1)
+        else:
+            a, ga, ya = t, gt, yt
+            gb, side = (0.5 * gb, side + 1) if side > 0 else (gb, 1)
+    switches = fired(guard, kinds, yb[:stepper.width])
+    impact = switches and switches[0][0] == "impact"   # arrive, not pass: the state before
+    t, y = (a, ya) if impact else (b, yb)
+    if piece is not None and t > 0.0:
+        piece(rhs, y0, t, y)
+    return t, stepper.apply(y, switches[:1] if impact else switches, at=elapsed + b)
+
+
 def steep(stepper, y) -> bool:
     """A joint sliding through Stribeck's dip (|q̇| within STEEP x its velocity): the
     friction law changes faster than anywhere else, so the step is estimated (accuracy.py),
@@ -271,6 +282,15 @@ def steep(stepper, y) -> bool:
         return False
     near = STEEP * friction.stribeck_velocity
     return any(stepper.mode[i] in ("+", "-") and abs(y[2 + i]) < near for i in (0, 1))
+
+
+def chattering(events: int) -> bool:
+    """A step's switches past the quota: impacts end at rest (Zeno chatter at a stop),
+    and far past it the step is refused (never a hang)."""
+    if events >= MAX_SWITCHES:
+        raise model.StepRefused(f"switches more than {MAX_SWITCHES} times within one step "
+                                "(chatter); reduce step_size")
+    return events >= MAX_EVENTS_PER_STEP
 
 
 def bounded(count: int) -> int:
@@ -291,28 +311,34 @@ def fired(guard, kinds, y) -> list:
 
 def impulse(stepper, y, mode, i, located) -> None:
     """Joint i arrives at a hard limit: q̇ᵢ -> −e q̇ᵢ by an impulse along it (a slow
-    bounce ends at rest); the other joint's velocity changes through M's coupling unless
-    it rests on a limit the impulse pushes it into. The kinetic energy lost is booked."""
+    bounce, or one past the step's quota, ends at rest); the other joint's velocity changes
+    through M's coupling unless it rests on a limit the impulse pushes it into (past the
+    quota: any limit it rests on, or two resting joints would kick each other off their
+    stops for ever). The kinetic energy lost is booked."""
     j, limits = 1 - i, stepper.limits
-    upper = y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
-    if not located:                               # switched late: put it back on the limit
-        y[i] = limits.upper[i] if upper else limits.lower[i]
-    v = y[2 + i]
-    e = limits.restitution if limits.restitution * abs(v) >= REST_SPEED else 0.0
+    v = y[2 + i]                                  # the stop it arrives at: a hair's gap
+    upper = v > 0.0 if v else y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
+    if not located or not limits.lower[i] <= y[i] <= limits.upper[i]:
+        y[i] = limits.upper[i] if upper else limits.lower[i]   # late, or past by rounding
+    bounce = not stepper.plastic and limits.restitution * abs(v) >= REST_SPEED
+    e = limits.restitution if bounce else 0.0
     m11, m12, m22 = model.mass_matrix(stepper.arm, y[:2])
     diagonal, other = (m11, m22) if i == 0 else (m22, m11)
     coupling = -m12 / other                       # Δq̇ⱼ / Δq̇ᵢ for an impulse along i
-    held = mode[j] in ("lower", "upper") and (coupling * -v > 0) == (mode[j] == "upper")
-    if held:                                      # both joints' stops take the impulse
+    held = mode[j] in ("lower", "upper") and (
+        stepper.plastic or (coupling * -v > 0) == (mode[j] == "upper"))
+    if held:                 # both joints' stops take the impulse (chatter: both rest)
         coupling, inverse = 0.0, 1.0 / diagonal
     else:
         inverse = other / (m11 * m22 - m12 * m12)   # (M⁻¹)ᵢᵢ
     change = -(1.0 + e) * v
     y[2 + i] = -e * v if e else 0.0
-    if coupling:
+    if coupling:              # the other joint moves (off its stop, if it pulls it away)
         y[2 + j] += coupling * change
-        if stepper.friction is not None and mode[j] not in ("lower", "upper"):
+        if stepper.friction is not None:
             mode[j] = "+" if y[2 + j] > 0 else "-" if y[2 + j] < 0 else "stuck"
+        elif mode[j] in ("lower", "upper"):
+            mode[j] = "free"
     if stepper.impact_at is not None:
         y[stepper.impact_at] += 0.5 * (1.0 - e * e) * v * v / inverse
     if e:

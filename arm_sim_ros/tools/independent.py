@@ -208,11 +208,10 @@ class Independent:
                 change[i] = -(1.0 + e) * v
             x[2:4] += change
             mode[i] = (None if self.fc is None else -int(np.sign(v))) if e else (
-                "upper" if x[i] > 0.5 * (self.lower[i] + self.upper[i]) else "lower")
-            if self.fc is not None:
-                j = 1 - i
-                if mode[j] not in ("lower", "upper"):
-                    mode[j] = int(np.sign(x[2 + j])) if x[2 + j] else 0
+                "upper" if v > 0 else "lower")
+            if change[j]:             # the other joint moves, off its stop if it rested
+                mode[j] = (int(np.sign(x[2 + j])) if x[2 + j] else 0) if self.fc is not None \
+                    else None
         return self.settle(x, mode, zone)
 
     def initial(self, x):
