@@ -234,3 +234,43 @@ def test_live_changes_a_recording_does_not_show_go_on_in_one_batch(tmp_path):
     rows = read_back(path)["energy/balance_residual"]
     assert len(rows["sim_time"]) == steps + 1
     assert rows["Scalars:scalars"][-1][0] == pytest.approx(final_residual, abs=1e-12)
+
+
+# Changes a recording shows (its rows read differently after them): the effort limits, a
+# payload grasped and released, the controller's model, a scene restarted, a reset.
+SHOWN_CHANGES = {
+    "effort limits": lambda core, i: core.set_parameters(
+        {"effort_limits": [[20.0, 10.0], [30.0, 15.0]][i % 2]}),
+    "payload": lambda core, i: core.set_parameters({"payload.mass": [0.5, 0.0][i % 2]}),
+    "controller model": lambda core, i: core.set_parameters(
+        {"controller_model.link_lengths": [[1.1, 0.9], [1.0, 1.0]][i % 2]}),
+    "restart": lambda core, i: core.set_parameters({"link_lengths": [[1.1, 0.9], [1.0, 1.0]][i % 2]}),
+    "reset": lambda core, i: core.reset(),
+}
+
+
+@pytest.mark.parametrize("change", SHOWN_CHANGES)
+def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatch, change):
+    """Rows before and after such a change read with their own snapshot, but go in the same
+    batch, one chunk per entity: rerun keeps an index entry per chunk (and per static log)
+    until the file closes, so 30 changes must not cost more chunks than 2; the static data
+    (styles, the scene as data) is logged once a send, from the latest setup."""
+    from rerun.chunk import RrdReader
+
+    from arm_sim_ros.recording import telemetry
+
+    monkeypatch.setattr(telemetry, "FILE_PERIOD", 1e9)   # one send: when the file closes
+
+    def chunks(changes: int) -> int:
+        path = tmp_path / f"{changes}.rrd"
+        core = core_of(rerun_path=str(path), publish_rate=100.0,
+                       policy="gravity_compensation")   # the controller's model drives it
+        for i in range(30):
+            if i < changes:
+                SHOWN_CHANGES[change](core, i)
+            core.tick()
+        core.finish()
+        return sum(1 for _ in RrdReader(str(path)).stream())
+
+    few, many = chunks(2), chunks(30)
+    assert many <= few + 2                     # before: ~25 more per change
