@@ -166,6 +166,29 @@ def test_the_slowest_node_still_stops_on_sigterm_at_once(tmp_path):
         process.communicate()
 
 
+def test_a_tick_of_minutes_stops_on_one_sigterm():
+    """The elbow reaches a compliant stop of damping 1e8 in the second tick, which (with the
+    cap on sub-steps raised) would take minutes: SIGTERM ends the node from inside it."""
+    env = os.environ | {"ROS_DOMAIN_ID": "201", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    process = subprocess.Popen(
+        [sys.executable, "-c", "import sys\nfrom arm_sim_ros.physics import stability\n"
+         "stability.MAX_SUBSTEPS = 10 ** 9\nfrom arm_sim_ros.node.main import main\n"
+         "sys.exit(main(sys.argv[1:]))", "--transport", "dds", "--quiet", "--ros-args",
+         "-p", "scene:=compliant_limit", "-p", "joint_limits.damping:=1e8",
+         "-p", "initial_positions:=[0.1, 1.95]", "-p", "initial_velocities:=[0.0, 3.0]"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while "started" not in (line := process.stderr.readline()):
+            assert line and time.monotonic() < deadline, "the node did not start"
+        time.sleep(1.0)                       # the first tick is free flight: well within
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=30) == 0  # a hang guard: the tick takes minutes
+    finally:
+        process.kill()
+        process.communicate()
+
+
 def test_reset_requests_at_200_per_second_are_all_answered():
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic

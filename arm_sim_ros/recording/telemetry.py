@@ -75,8 +75,7 @@ class RerunRecorder:
         self.live = bool(spawn or connect)
         self._warn, self._warned = warn or logging.getLogger(__name__).warning, set()
         self.stream = stream if stream is not None else rr.RecordingStream(application_id)
-        self.sinks = []           # descriptions of the sinks that opened
-        self.enabled = False
+        self.sinks, self.enabled = [], False   # descriptions of the sinks that opened
         self.sim = None
         self._snapshot = None     # how the steps waiting read: sim's layout when they were taken
         self._dynamics = None     # sim.dynamics then (a payload grasped rebuilds it)
@@ -208,7 +207,8 @@ class RerunRecorder:
         if carried and _alike_carried_on(self, sim):
             return True
         if previous is not None:
-            close_segment(self)             # flush() sends it with the rows after
+            close_segment(self)
+            self.flush()        # when due: a held node records no steps, only setups
         initial = self._snapshot.initial if carried and self._snapshot is not None else None
         self.sim, self._dynamics, self._snapshot = sim, sim.dynamics, None
         self._next = sim.steps + carried      # the next step to record
