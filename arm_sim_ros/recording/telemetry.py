@@ -91,13 +91,13 @@ class RerunRecorder:
         self._static_due = None   # (snap, sim) whose static data is logged at the next send
         self.node = False         # a node's recording: its story per tick, ros_time its stamps
         self.stamp_origin_ns = 0  # ros_time at sim_time 0 (arm-sim run: stamps are sim time)
-        self._static = StaticData()
+        self._static = StaticData(self.live)
         self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
         self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
         self._writer = BatchWriter(self.stream)   # the sender thread's: timeline and trace
-        self._layout = None       # what the blueprint was drawn for: Snapshot.key
+        self._layout = None       # what the first blueprint was drawn for: Snapshot.key
         self._sender = SenderThread(self._deliver)
 
     # -- protocol ---------------------------------------------------------------------
@@ -222,19 +222,16 @@ class RerunRecorder:
         return carried
 
     def _describe(self, sim, initial=None) -> None:
-        """Open the sinks (first time) and log what does not change from step to step."""
+        """Open the sinks (first time); what does not change from step to step (the layout
+        too) is logged at the next send (StaticData)."""
         snap = self._snapshot = Snapshot(sim, initial)
         snap.arm3d = arm3d_for(sim.scene.links)   # the URDF has no payload
-        layout = snap.key
         if self._layout is None:
-            board = blueprint(snap, self.live, self.node)
-            if open_sinks(self.stream, board, self.sinks, self._warn_once, path=self.path,
-                          spawn=self.spawn, connect=self.connect):
+            self._layout = self._static.drawn(snap)   # the default blueprint: drawn here
+            if open_sinks(self.stream, blueprint(snap, self.live, self.node), self.sinks,
+                          self._warn_once, path=self.path, spawn=self.spawn, connect=self.connect):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
-        elif layout != self._layout and self.enabled:
-            send_blueprint(self.stream, blueprint(snap, self.live, self.node))
-        self._layout = layout
         self._static_due = (snap, sim)
 
     # -- sending ------------------------------------------------------------------------
@@ -299,15 +296,24 @@ def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
 
 
 class StaticData:
-    """What a recording logs static (series styles, the scene as data, the 3D arm), logged
-    again only where it changed, and at most once a send (flush): a live change (100/s
-    from a slider or a fuzzer) must not grow the file and rerun's memory by a mesh, or by
-    ~20 styles and properties (~2 kB each in rerun's index), each time."""
+    """What a recording logs static (the blueprint, series styles, the scene as data, the
+    3D arm), logged again only where it changed, and at most once a send (flush): a live
+    change (100/s from a slider or a fuzzer) must not grow the file and rerun's memory by
+    a mesh, or a blueprint's ~70 entries, or ~20 styles and properties, each time (rerun
+    keeps ~2 kB per entry until the file closes)."""
 
-    def __init__(self):
+    def __init__(self, live: bool):
+        self.live = live
         self._sent = {}           # kind -> what it was last logged from
 
+    def drawn(self, snap) -> tuple:
+        """The layout of the blueprint the sinks opened with (snap's): not sent again."""
+        self._sent["layout"] = snap.key
+        return snap.key
+
     def send(self, stream, snap, sim, node: bool, stamp_origin_ns) -> None:
+        if self._changed("layout", snap.key):
+            send_blueprint(stream, blueprint(snap, self.live, node))
         if self._changed("styles", (snap.key, effects_document(snap))):
             for path, archetypes in styles(snap, node):
                 stream.log(path, *archetypes, static=True)
