@@ -115,12 +115,14 @@ def threads() -> int:
 
 # Every parameter that may change while the node runs gets its value now, one nearby and
 # hostile ones (refused: a transaction that changes nothing). These get the hostile ones only:
-# a new file or viewer per change, a stopped timer, a JointState rate the table measures
-# (a real_time_factor of 1e200 is accepted: as fast as it can, as 0 is).
+# a new file or viewer per change, a stopped timer, a JointState rate the table measures;
+# and of those only ones the node refuses (a real_time_factor of 1e200 runs as fast as it
+# can, as 0 does; any text is a viewer address to try).
 HOSTILE = [math.nan, math.inf, 1e200, 5e-324, -1.0, "nonsense"]
 HOSTILE_ONLY = ("rerun_path", "rerun_spawn", "rerun_connect", "lockstep", "publish_rate",
                 "real_time_factor")
-REFUSED_RATES = [math.nan, math.inf, 5e-324, 1e-12, -1.0, "nonsense"]
+REFUSED_ONLY = {"real_time_factor": [math.nan, math.inf, 5e-324, 1e-12, -1.0, "nonsense"],
+                "rerun_connect": [math.nan, 1e200, -1.0]}
 
 
 def nearby(value):
@@ -143,8 +145,7 @@ def live_changes(values: dict) -> list:
             continue
         now = values[spec.name]
         good = [] if spec.name in HOSTILE_ONLY or now is None else [now, nearby(now)]
-        changes.append((spec.name, good + (REFUSED_RATES if spec.name == "real_time_factor"
-                                           else HOSTILE)))
+        changes.append((spec.name, good + REFUSED_ONLY.get(spec.name, HOSTILE)))
     return changes
 
 

@@ -315,15 +315,16 @@ class StaticData:
         if self._changed("layout", snap.key):
             send_blueprint(stream, blueprint(snap, self.live, node))
         if self._changed("styles", (snap.key, effects_document(snap))):
-            for path, archetypes in styles(snap, node):
-                stream.log(path, *archetypes, static=True)
+            for path, archetypes in styles(snap, node):    # each entity's, where it changed
+                if self._changed(("style", path), repr(archetypes)):
+                    stream.log(path, *archetypes, static=True)
         if self._changed("properties", (sim.scene, snap.key)):   # a reset keeps them
             send_properties(stream, snap, sim, stamp_origin_ns, node)
         if snap.arm3d is not None and self._changed(
                 "arm3d", (snap.arm3d, snap.arm, sim.scene.gravity, snap.drives)):
             snap.arm3d.log_static(stream, snap.arm, sim.scene.gravity, snap.drives)
 
-    def _changed(self, kind: str, source) -> bool:
+    def _changed(self, kind, source) -> bool:
         if self._sent.get(kind) == source:
             return False
         self._sent[kind] = source
