@@ -318,3 +318,13 @@ def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatc
 
     few, many = chunks(2), chunks(30)
     assert many <= few + 2                     # before: ~25 more per change
+
+
+def test_a_recording_draws_an_absurd_accepted_value_without_a_python_warning(tmp_path, recwarn):
+    """Gravity 1e200 is accepted (the arm holds, faulted); the 3D arm's gravity arrow is
+    drawn at the arm's reach, and nothing overflows rerun's float32 on the way."""
+    core = core_of(rerun_path=str(tmp_path / "arm.rrd"), policy="command")
+    core.set_parameters({"gravity": 1e200})
+    core.tick()
+    core.finish()
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]

@@ -71,10 +71,12 @@ class Arm3D:
             stream.log(f"{ROOT}/com/{link}", rr.CoordinateFrame(link),
                        rr.Points3D([(distance, 0.0, 0.0)], radii=[0.035], colors=[(245, 245, 245)],
                                    labels=[f"COM {mass:g} kg"], show_labels=False), static=True)
-        if gravity:   # along the plane's -y: the world's -z
+        if gravity:   # along the plane's -y: the world's -z; never longer than the arm reaches
+            reach = sum(arm.link_lengths)
             stream.log(f"{ROOT}/gravity", rr.CoordinateFrame(PLANE), rr.Arrows3D(
-                origins=[(-0.5 * sum(arm.link_lengths), 0.0, 0.0)],
-                vectors=[(0.0, -GRAVITY_SCALE * gravity, 0.0)], colors=[(100, 150, 255)],
+                origins=[(-0.5 * reach, 0.0, 0.0)],
+                vectors=[(0.0, -max(-reach, min(reach, GRAVITY_SCALE * gravity)), 0.0)],
+                colors=[(100, 150, 255)],
                 labels=[f"g {gravity:g} m/s²"], radii=[0.015]), static=True)
         if torques:
             for path, link, color in zip(TORQUE_PATHS, LINKS, JOINT_COLORS):

@@ -40,10 +40,10 @@ import numpy as np
 import rerun as rr
 
 from .arm3d import arm3d_for
-from .blueprint import blueprint, effects_document, styles
-from .properties import send_properties
+from .blueprint import blueprint
 from .readouts import Snapshot, error_books, held_by, reads_alike
-from .sinks import check_rrd_file, open_sinks, send_blueprint
+from .sinks import check_rrd_file, open_sinks
+from .static_data import StaticData
 from .writer import BatchWriter
 
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
@@ -293,42 +293,6 @@ def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
     snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
     recorder._static_due = (snap, sim)
     return True
-
-
-class StaticData:
-    """What a recording logs static (the blueprint, series styles, the scene as data, the
-    3D arm), logged again only where it changed, and at most once a send (flush): a live
-    change (100/s from a slider or a fuzzer) must not grow the file and rerun's memory by
-    a mesh, or a blueprint's ~70 entries, or ~20 styles and properties, each time (rerun
-    keeps ~2 kB per entry until the file closes)."""
-
-    def __init__(self, live: bool):
-        self.live = live
-        self._sent = {}           # kind -> what it was last logged from
-
-    def drawn(self, snap) -> tuple:
-        """The layout of the blueprint the sinks opened with (snap's): not sent again."""
-        self._sent["layout"] = snap.key
-        return snap.key
-
-    def send(self, stream, snap, sim, node: bool, stamp_origin_ns) -> None:
-        if self._changed("layout", snap.key):
-            send_blueprint(stream, blueprint(snap, self.live, node))
-        if self._changed("styles", (snap.key, effects_document(snap))):
-            for path, archetypes in styles(snap, node):    # each entity's, where it changed
-                if self._changed(("style", path), repr(archetypes)):
-                    stream.log(path, *archetypes, static=True)
-        if self._changed("properties", (sim.scene, snap.key)):   # a reset keeps them
-            send_properties(stream, snap, sim, stamp_origin_ns, node)
-        if snap.arm3d is not None and self._changed(
-                "arm3d", (snap.arm3d, snap.arm, sim.scene.gravity, snap.drives)):
-            snap.arm3d.log_static(stream, snap.arm, sim.scene.gravity, snap.drives)
-
-    def _changed(self, kind, source) -> bool:
-        if self._sent.get(kind) == source:
-            return False
-        self._sent[kind] = source
-        return True
 
 
 class SenderThread:
