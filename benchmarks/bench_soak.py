@@ -1,12 +1,13 @@
 """Soak: 10^7 simulator steps across long, fast and stiff runs, then a long node run on DDS
 with a command flood; finiteness, energy drift and resident memory before and after; then a
 node spinning in real time with a Rerun recording open while a client changes its live
-parameters 100 times a second: threads, RSS, JointState and replies per window.
+parameters (every live one, good and hostile values) 200 times a second: threads, RSS,
+JointState and replies per window, and the time to answer a set.
 
 Not a test: wall times depend on what else the machine runs.
 
     python benchmarks/bench_soak.py [--scale 1.0] [--node-seconds 1800]
-                                    [--changes-seconds 30] [--changes-rate 100] [--only changes]
+                                    [--changes-seconds 60] [--changes-rate 200] [--only changes]
 """
 from __future__ import annotations
 
@@ -112,17 +113,59 @@ def threads() -> int:
         return next(int(line.split()[1]) for line in status if line.startswith("Threads:"))
 
 
-# Live values a slider or a fuzzer sends in turn: the effects that change live, one that
-# restarts the scene, and ones the node refuses (a transaction that changes nothing).
-CHANGES = [("damping", [0.5, 0.1]), ("friction.coulomb", [[0.2, 0.1], [0.05, 0.05]]),
-           ("effort_limits", [[20.0, 10.0], [30.0, 15.0]]), ("payload.mass", [0.5, 0.0]),
-           ("controller_model.link_lengths", [[1.1, 0.9], [1e200, 1e200]]),
-           ("gravity", [9.81, 9.5]), ("real_time_factor", [1.0, 5e-324])]
+# Every parameter that may change while the node runs gets its value now, one nearby and
+# hostile ones (refused: a transaction that changes nothing). These get the hostile ones only:
+# a new file or viewer per change, a stopped timer, a JointState rate the table measures;
+# and of those only ones the node refuses (a real_time_factor of 1e200 runs as fast as it
+# can, as 0 does; any text is a viewer address to try).
+HOSTILE = [math.nan, math.inf, 1e200, 5e-324, -1.0, "nonsense"]
+HOSTILE_ONLY = ("rerun_path", "rerun_spawn", "rerun_connect", "lockstep", "publish_rate",
+                "real_time_factor")
+REFUSED_ONLY = {"real_time_factor": [math.nan, math.inf, 5e-324, 1e-12, -1.0, "nonsense"],
+                "rerun_connect": [math.nan, 1e200, -1.0]}
+
+
+def nearby(value):
+    """A value next to a parameter's value now (numbers x 1.1, 0.1 for a zero)."""
+    if isinstance(value, bool) or isinstance(value, str):
+        return value
+    if isinstance(value, (int, float)):
+        return value * 1.1 if value else 0.1
+    if value and all(isinstance(v, (int, float)) for v in value):
+        return [v * 1.1 if v else 0.1 for v in value]
+    return value
+
+
+def live_changes(values: dict) -> list:
+    """[(name, [values])] of every parameter that changes live (node/parameters.py)."""
+    from arm_sim_ros.node.parameters import PARAMETERS, START
+    changes = []
+    for spec in PARAMETERS:
+        if spec.when == START:
+            continue
+        now = values[spec.name]
+        good = [] if spec.name in HOSTILE_ONLY or now is None else [now, nearby(now)]
+        changes.append((spec.name, good + REFUSED_ONLY.get(spec.name, HOSTILE)))
+    return changes
+
+
+def wire(value):
+    """(ParameterType, value) of a Python value."""
+    from arm_sim_ros.node.parameter_services import BOOL, DOUBLE, DOUBLE_ARRAY, STRING, STRING_ARRAY
+    if isinstance(value, bool):
+        return BOOL, value
+    if isinstance(value, str):
+        return STRING, value
+    if isinstance(value, (int, float)):
+        return DOUBLE, float(value)
+    return (STRING_ARRAY, list(value)) if value and isinstance(value[0], str) else (
+        DOUBLE_ARRAY, [float(v) for v in value])
 
 
 def changes_soak(seconds: float, rate: float, window: float = 5.0, record: bool = True) -> None:
-    """A node spinning as arm_sim_node spins it (real time, 100 Hz, recording to a .rrd) while
-    a client sends set_parameters at `rate`/s; one row per `window` s of wall time."""
+    """A node spinning as arm_sim_node spins it (real time, 100 Hz, recording to a .rrd or
+    not) while a client sends set_parameters at `rate`/s over every live parameter; one
+    row per `window` s of wall time, then one summary row."""
     import tempfile
     import threading
     from pathlib import Path
@@ -135,13 +178,13 @@ def changes_soak(seconds: float, rate: float, window: float = 5.0, record: bool 
     from arm_sim_ros.node.transports import dds_service_types as t
     from arm_sim_ros.node.transports.dds import DdsArmSimNode
     from arm_sim_ros.node.transports.dds_services import cs_id, endpoint_qos, to_value
-    from arm_sim_ros.node.parameter_services import DOUBLE, DOUBLE_ARRAY
 
     domain, folder = 78, Path(tempfile.mkdtemp(prefix="arm_sim_soak_"))
     node = DdsArmSimNode({"damping": 0.5, "rerun_path": str(folder / "soak.rrd") if record else ""},
                          domain_id=domain, config=msg.LOOPBACK_CONFIG,
                          log=logging.getLogger("soak.changes"))
-    logging.getLogger("soak.changes").setLevel(logging.ERROR)   # refusals by the thousand
+    logging.getLogger("soak.changes").setLevel(logging.CRITICAL)   # refusals by the thousand
+    changes = live_changes(node.core.config.values)
     peer = msg.make_participant(domain, msg.LOOPBACK_CONFIG)
     ids = f"clientid={cs_id(peer.guid.bytes, 1)};"
     request = DataWriter(peer, Topic(peer, "rq/arm_sim/set_parametersRequest",
@@ -156,42 +199,73 @@ def changes_soak(seconds: float, rate: float, window: float = 5.0, record: bool 
         time.sleep(0.01)
     spinner = threading.Thread(target=lambda: node.spin(seconds + 2 * window))
     spinner.start()
+    sent_at, latencies, counts, done = {}, [], {"states": 0, "replies": 0, "refused": 0}, []
+
+    def take_replies():           # its own thread: a reply's latency, to the millisecond
+        while not done:
+            for reply in replies.take(N=1000):
+                if isinstance(reply, t.SetParametersResponse):
+                    latencies.append(time.monotonic() - sent_at.pop(reply.seq, math.nan))
+                    counts["replies"] += 1
+                    counts["refused"] += not reply.results[0].successful
+            time.sleep(0.0005)
+
+    taker = threading.Thread(target=take_replies)
+    taker.start()
     guid, seq, rng = request.get_instance_handle() & ((1 << 64) - 1), 0, random.Random(3)
-    print(f"\nlive parameter changes on DDS: {rate:g}/s for {seconds:g} s, the node "
-          f"{'recording to a .rrd' if record else 'not recording'}, publish_rate 100 in real time")
+    print(f"\nlive parameter changes on DDS: {rate:g}/s for {seconds:g} s over {len(changes)} "
+          f"live parameters, the node {'recording to a .rrd' if record else 'not recording'}, "
+          "publish_rate 100 in real time")
     print(f"{'wall s':>6s} {'threads':>7s} {'RSS MB':>7s} {'JointState/s':>12s} "
           f"{'replies/s':>9s} {'refused':>7s}")
     start = next_row = time.monotonic()
-    counts = {"states": 0, "replies": 0, "refused": 0}
+    first, warm = (threads(), rss_mb()), None      # at the start; after the first window
+    total_states = 0
     while (now := time.monotonic()) - start < seconds:
-        name, values = rng.choice(CHANGES)
-        value = rng.choice(values)
-        kind = DOUBLE_ARRAY if isinstance(value, list) else DOUBLE
+        name, values = rng.choice(changes)
         seq += 1
+        sent_at[seq] = time.monotonic()
         request.write(t.SetParametersRequest(guid=guid, seq=seq, parameters=[
-            t.Parameter(name, to_value(kind, value))]))
-        for reply in replies.take(N=1000):
-            if isinstance(reply, t.SetParametersResponse):
-                counts["replies"] += 1
-                counts["refused"] += not reply.results[0].successful
-        counts["states"] += sum(isinstance(s, msg.JointState) for s in states.take(N=1000))
+            t.Parameter(name, to_value(*wire(rng.choice(values))))]))
+        arrived = sum(isinstance(s, msg.JointState) for s in states.take(N=1000))
+        counts["states"] += arrived
+        total_states += arrived
         if now >= next_row:
             span = window if now > start else 1.0
             print(f"{now - start:6.0f} {threads():7d} {rss_mb():7.1f} "
                   f"{counts['states'] / span:12.0f} {counts['replies'] / span:9.0f} "
                   f"{counts['refused']:7d}", flush=True)
-            counts, next_row = dict.fromkeys(counts, 0), next_row + window
+            counts.update(dict.fromkeys(counts, 0))
+            next_row += window
+            if warm is None and now - start >= window:
+                warm = (threads(), rss_mb(), seq)
         time.sleep(max(0.0, start + seq / rate - time.monotonic()))
+    wall = time.monotonic() - start
+    time.sleep(0.5)
+    # spin() ends at a simulated time, and a node held (an accepted value it cannot integrate:
+    # until a reset or restart) stands still: move its clock past the end
+    node.core._elapsed_before_reset_ns += round((seconds + 2 * window) * 1e9)
+    done.append(True)
+    taker.join()
+    last = (threads(), rss_mb())
     spinner.join()
     node.close()
+    answered = sorted(x for x in latencies if x == x)
+    p50, p99 = (answered[int(q * (len(answered) - 1))] * 1e3 for q in (0.5, 0.99))
+    print(f"summary: {seq} sets sent, {len(answered)} answered; threads {first[0]}, "
+          f"{warm[0]} after {warm[2]} sets, {last[0]} after {seq}; RSS {first[1]:.1f}, "
+          f"{warm[1]:.1f} after {warm[2]} sets, {last[1]:.1f} MB after {seq} "
+          f"({(last[1] - warm[1]) * 1024 / (seq - warm[2]):.2f} kB per set since); JointState "
+          f"{total_states / wall:.0f}/s; answer latency p50 {p50:.1f} ms, p99 {p99:.1f} ms, "
+          f"max {answered[-1] * 1e3:.1f} ms")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scale", type=float, default=1.0, help="fraction of the 10^7 steps")
     parser.add_argument("--node-seconds", type=float, default=1800.0)
-    parser.add_argument("--changes-seconds", type=float, default=30.0)
-    parser.add_argument("--changes-rate", type=float, default=100.0)
+    parser.add_argument("--changes-seconds", type=float, default=60.0)
+    parser.add_argument("--changes-rate", type=float, default=200.0)
     parser.add_argument("--only", choices=("simulator", "node", "changes"))
     args = parser.parse_args()
     if args.only in (None, "simulator"):

@@ -76,6 +76,27 @@ def test_a_live_change_that_fails_midway_leaves_the_simulator_as_it_was(monkeypa
     assert snapshot(core)[:4] == before[:4] and core.sim.scene is before[1].scene
 
 
+def test_a_live_change_from_a_refused_plan_is_refused_whole_or_taken_whole():
+    """Damping 1e200 is accepted and held (its plan needs more sub-steps than the cap); a
+    live change from there must not leave half a rebuild behind (it once raised from the
+    error books' carry-over and left the new dynamics beside the old books)."""
+    core = core_of(damping=0.5)
+    core.set_parameters({"damping": 1e200})
+    core.tick()
+    before = snapshot(core)
+    for changes in ({"damping": 5e-324}, {"payload.mass": 5e-324},
+                    {"controller_model.gravity": 1e200}):
+        try:
+            core.set_parameters(changes)
+        except ParameterRefused as refused:
+            assert "Error" not in str(refused) and "object has no" not in str(refused)
+            assert snapshot(core)[:4] == before[:4]
+        before = snapshot(core)
+        assert finite(core.tick())
+    core.reset()
+    assert all(finite(core.tick()) for _ in range(5))
+
+
 @pytest.mark.parametrize("rtf", [1e-12, 5e-324, 1e-9])
 def test_a_real_time_factor_that_stretches_a_tick_over_hours_is_refused_live_and_at_start(rtf):
     core = core_of()
@@ -140,6 +161,29 @@ def test_the_slowest_node_still_stops_on_sigterm_at_once(tmp_path):
         stopped = time.monotonic()
         assert process.wait(timeout=5) == 0
         assert time.monotonic() - stopped < 2.0
+    finally:
+        process.kill()
+        process.communicate()
+
+
+def test_a_tick_of_minutes_stops_on_one_sigterm():
+    """The elbow reaches a compliant stop of damping 1e8 in the second tick, which (with the
+    cap on sub-steps raised) would take minutes: SIGTERM ends the node from inside it."""
+    env = os.environ | {"ROS_DOMAIN_ID": "201", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    process = subprocess.Popen(
+        [sys.executable, "-c", "import sys\nfrom arm_sim_ros.physics import stability\n"
+         "stability.MAX_SUBSTEPS = 10 ** 9\nfrom arm_sim_ros.node.main import main\n"
+         "sys.exit(main(sys.argv[1:]))", "--transport", "dds", "--quiet", "--ros-args",
+         "-p", "scene:=compliant_limit", "-p", "joint_limits.damping:=1e8",
+         "-p", "initial_positions:=[0.1, 1.95]", "-p", "initial_velocities:=[0.0, 3.0]"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while "started" not in (line := process.stderr.readline()):
+            assert line and time.monotonic() < deadline, "the node did not start"
+        time.sleep(1.0)                       # the first tick is free flight: well within
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=30) == 0  # a hang guard: the tick takes minutes
     finally:
         process.kill()
         process.communicate()
@@ -234,3 +278,53 @@ def test_live_changes_a_recording_does_not_show_go_on_in_one_batch(tmp_path):
     rows = read_back(path)["energy/balance_residual"]
     assert len(rows["sim_time"]) == steps + 1
     assert rows["Scalars:scalars"][-1][0] == pytest.approx(final_residual, abs=1e-12)
+
+
+# Changes a recording shows (its rows read differently after them): the effort limits, a
+# payload grasped and released, the controller's model, a scene restarted, a reset.
+SHOWN_CHANGES = {
+    "effort limits": lambda core, i: core.set_parameters(
+        {"effort_limits": [[20.0, 10.0], [30.0, 15.0]][i % 2]}),
+    "payload": lambda core, i: core.set_parameters({"payload.mass": [0.5, 0.0][i % 2]}),
+    "controller model": lambda core, i: core.set_parameters(
+        {"controller_model.link_lengths": [[1.1, 0.9], [1.0, 1.0]][i % 2]}),
+    "restart": lambda core, i: core.set_parameters({"link_lengths": [[1.1, 0.9], [1.0, 1.0]][i % 2]}),
+    "reset": lambda core, i: core.reset(),
+}
+
+
+@pytest.mark.parametrize("change", SHOWN_CHANGES)
+def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatch, change):
+    """Rows before and after such a change read with their own snapshot, but go in the same
+    batch, one chunk per entity: rerun keeps an index entry per chunk (and per static log)
+    until the file closes, so 30 changes must not cost more chunks than 2; the static data
+    (styles, the scene as data) is logged once a send, from the latest setup."""
+    from rerun.chunk import RrdReader
+
+    from arm_sim_ros.recording import telemetry
+
+    monkeypatch.setattr(telemetry, "FILE_PERIOD", 1e9)   # one send: when the file closes
+
+    def chunks(changes: int) -> int:
+        path = tmp_path / f"{changes}.rrd"
+        core = core_of(rerun_path=str(path), publish_rate=100.0,
+                       policy="gravity_compensation")   # the controller's model drives it
+        for i in range(30):
+            if i < changes:
+                SHOWN_CHANGES[change](core, i)
+            core.tick()
+        core.finish()
+        return sum(1 for _ in RrdReader(str(path)).stream())
+
+    few, many = chunks(2), chunks(30)
+    assert many <= few + 2                     # before: ~25 more per change
+
+
+def test_a_recording_draws_an_absurd_accepted_value_without_a_python_warning(tmp_path, recwarn):
+    """Gravity 1e200 is accepted (the arm holds, faulted); the 3D arm's gravity arrow is
+    drawn at the arm's reach, and nothing overflows rerun's float32 on the way."""
+    core = core_of(rerun_path=str(tmp_path / "arm.rrd"), policy="command")
+    core.set_parameters({"gravity": 1e200})
+    core.tick()
+    core.finish()
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]

@@ -79,6 +79,48 @@ def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_nam
     assert max(read_back(outputs["--rerun"])["energy/total"]["sim_time"]) == round(last * 1e9)
 
 
+# `arm-sim run` with the stability plan's cap on sub-steps raised, so that one step of an
+# engaged compliant limit with damping 1e8 takes minutes (the cap bounds a step to ~2 s on
+# an idle machine); it says on stderr when its stop handler is in.
+SLOW_STEP_RUN = [sys.executable, "-c", """
+import sys
+from arm_sim_ros.physics import stability
+from arm_sim_ros.tools import cli, signals
+stability.MAX_SUBSTEPS = 10 ** 9
+enter = signals.StopOnSignals.__enter__
+def noted(self):
+    print("stop handler in", file=sys.stderr, flush=True)
+    return enter(self)
+signals.StopOnSignals.__enter__ = noted
+sys.exit(cli.main(sys.argv[1:]))
+""", "run", "--scene", "compliant_limit", "--set", "joint_limits.damping=1e8",
+                 "--set", "initial_positions=0.1,1.95", "--set", "initial_velocities=0,3"]
+
+
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])
+def test_one_signal_stops_a_step_of_minutes_at_the_last_whole_step(tmp_path, signal_name):
+    """The elbow reaches its compliant stop in the second step, which would take minutes:
+    one signal abandons it, and the CSV and the JSON end at the first."""
+    rows = tmp_path / "run.csv"
+    process = subprocess.Popen([*SLOW_STEP_RUN, "--duration", "1", "--json", "--csv", str(rows)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr.readline() == "stop handler in\n"
+        time.sleep(1.0)                             # the free step is taken within that
+        process.send_signal(getattr(signal, signal_name))
+        out, err = process.communicate(timeout=30)  # a hang guard: the step takes minutes
+    finally:
+        process.kill()
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and f"interrupted ({signal_name}) at t = 0.010000 s" in err
+    result = strict_json(out)
+    assert result["interrupted_at"] == result["t"] == 0.01
+    with open(rows) as stream:
+        table = list(csv.reader(stream))
+    assert [float(row[0]) for row in table[1:]] == [0.0, 0.01]
+    assert float(table[-1][1]) == result["q"][0] and float(table[-1][2]) == result["q"][1]
+
+
 @pytest.mark.parametrize("command", [["run"], ["run", "--csv", "/dev/stdout", "--duration", "5"],
                                      ["scenes"]])
 def test_a_reader_that_goes_away_ends_the_run_quietly(command):
@@ -182,3 +224,37 @@ def test_a_run_that_diverged_while_finite_says_so_and_exits_1(capsys, argv):
 def test_no_preset_trips_the_divergence_guard(capsys, scene):
     assert cli.main(["run", "--scene", scene, "--duration", "5", "--json"]) == 0
     assert strict_json(capsys.readouterr().out)["fault"] is None
+
+
+def test_a_step_abandoned_midway_leaves_the_simulator_as_the_step_before_left_it():
+    """Stopped inside a sub-stepped step of a compliant stop (its error books, switch counts
+    and shadow half done), the simulator is put back at the step before: state, books,
+    counts and events as those of a run that ended there."""
+    from arm_sim_ros.physics.scene import load_scene
+    from arm_sim_ros.physics.simulator import Simulator, check_divergence
+    from arm_sim_ros.tools.signals import StopOnSignals
+    from arm_sim_ros.tools.whole_steps import WholeSteps
+
+    scene = load_scene("compliant_limit").replace(initial_positions=(0.1, 1.95),
+                                                  initial_velocities=(0.0, 3.0))
+    sim, reference = Simulator(scene), Simulator(scene)
+    real, calls, seen = sim.switching.step, [0], []
+
+    def sub_step(*args):                  # the switching stepper's integrator step
+        calls[0] += 1
+        if calls[0] == 400:               # inside step 90, taken as 131 sub-steps
+            signal.raise_signal(signal.SIGTERM)
+        return real(*args)
+
+    sim.switching.step = sub_step
+    with StopOnSignals() as stop:
+        WholeSteps(sim, stop).run(300, lambda s: seen.append((s.steps, calls[0])))
+    assert stop.requested == "SIGTERM"
+    assert sim.steps == seen[-1][0] == 90 and seen[-1][1] < 400
+    for _ in range(sim.steps):
+        reference.step()
+    check_divergence(reference)
+    assert sim.state == reference.state and sim.substeps_taken == reference.substeps_taken
+    assert sim.error_estimate == reference.error_estimate
+    assert sim.accumulated_error == reference.accumulated_error
+    assert sim.switch_events == reference.switch_events and list(sim.events) == list(reference.events)

@@ -33,7 +33,7 @@ def change_live(sim: Simulator, config: NodeConfig, names: list) -> None:
             servo.change_scene(sim, config.scene.replace(payload=sim.scene.payload))
         if not all(isfinite(v) for v in sim.state):
             raise OverflowError("the carried-over state is not finite")
-    except (ValueError, ArithmeticError) as error:
+    except Exception as error:     # whatever failed midway, the simulator is left as it was
         sim.__dict__.clear()
         sim.__dict__.update(kept)
         raise refusal(error, names) from None
@@ -43,7 +43,11 @@ def refusal(error: Exception, changed) -> ParameterRefused:
     """The refusal of `changed` for a physics error, in the physics' words."""
     if isinstance(error, (ParameterError, SceneError)):
         reason = str(error)
-    else:   # Python's words (math range error) would not tell anyone which quantity
+    elif isinstance(error, (ValueError, ArithmeticError)):
+        # Python's words (math range error) would not tell anyone which quantity
         reason = ("the physics with these values leaves double precision (it overflows while "
                   "the dynamics and its step plan are built); use values at a robot's scale")
+    else:   # a fault of the rebuild itself: refused all the same, nothing changed
+        reason = ("the running physics could not be carried over to these values; nothing "
+                  "changed (reset, or set them from a state the node can integrate)")
     return ParameterRefused(blamed(reason, list(changed)), reason)

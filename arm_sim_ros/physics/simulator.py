@@ -323,3 +323,10 @@ def sample(sim: Simulator) -> Sample:
                   dissipated=channels.get("dissipated", 0.0), initial_energy=sim.initial_energy,
                   extra=dict(zip(sim.extra, y[4:4 + len(sim.extra)])),
                   channels=channels, inputs=inputs, losses=losses)
+
+
+def check_divergence(sim: Simulator) -> None:
+    """The divergence check Simulator.run ends with (a run stopped early ends with it too:
+    tools/whole_steps.py)."""
+    if not sim.holding:
+        sim._check_divergence()

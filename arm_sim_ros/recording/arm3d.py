@@ -71,34 +71,36 @@ class Arm3D:
             stream.log(f"{ROOT}/com/{link}", rr.CoordinateFrame(link),
                        rr.Points3D([(distance, 0.0, 0.0)], radii=[0.035], colors=[(245, 245, 245)],
                                    labels=[f"COM {mass:g} kg"], show_labels=False), static=True)
-        if gravity:   # along the plane's -y: the world's -z
+        if gravity:   # along the plane's -y: the world's -z; never longer than the arm reaches
+            reach = sum(arm.link_lengths)
             stream.log(f"{ROOT}/gravity", rr.CoordinateFrame(PLANE), rr.Arrows3D(
-                origins=[(-0.5 * sum(arm.link_lengths), 0.0, 0.0)],
-                vectors=[(0.0, -GRAVITY_SCALE * gravity, 0.0)], colors=[(100, 150, 255)],
+                origins=[(-0.5 * reach, 0.0, 0.0)],
+                vectors=[(0.0, -max(-reach, min(reach, GRAVITY_SCALE * gravity)), 0.0)],
+                colors=[(100, 150, 255)],
                 labels=[f"g {gravity:g} m/s²"], radii=[0.015]), static=True)
         if torques:
             for path, link, color in zip(TORQUE_PATHS, LINKS, JOINT_COLORS):
                 stream.log(path, rr.CoordinateFrame(link), rr.Arrows3D.from_fields(
                     colors=[color], radii=[0.02]), static=True)
 
-    def send(self, stream, index, q1, q2, torque=None) -> None:
+    def send(self, send, index, q1, q2, torque=None) -> None:
         """The joints at angles q1, q2 (each a turn about its axis after its origin's
         rotation) and, with a drive, the (n, 2) joint torques as arrows along the joint axes,
-        on the time columns `index`. Built as Arrow: UrdfJoint.compute_transform_columns
+        on the time columns `index`, each through `send(path, index, build, data, *options)`
+        (writer.BatchWriter._send_columns). Built as Arrow: UrdfJoint.compute_transform_columns
         costs 1.5 µs a step through Python lists."""
         for joint, angles in zip(self.joints, (q1, q2)):
             half = 0.5 * np.asarray(angles, dtype=float)
             turn = np.zeros((len(half), 4))
             turn[:, :3], turn[:, 3] = np.outer(np.sin(half), joint.axis), np.cos(half)
-            rr.send_columns(f"{ROOT}/joints/{joint.name}", indexes=index,
-                            columns=joint_transforms(compose(rpy_quaternion(joint.origin_rpy), turn),
-                                                     joint.origin_xyz, joint.parent_link,
-                                                     joint.child_link), recording=stream)
+            send(f"{ROOT}/joints/{joint.name}", index, joint_transforms,
+                 compose(rpy_quaternion(joint.origin_rpy), turn), tuple(joint.origin_xyz),
+                 joint.parent_link, joint.child_link)
         if torque is None:
             return
         for k, (path, joint) in enumerate(zip(TORQUE_PATHS, self.joints)):
             arrows = TORQUE_SCALE * np.outer(torque[:, k], joint.axis)
-            rr.send_columns(path, indexes=index, columns=vectors3d(arrows), recording=stream)
+            send(path, index, vectors3d, arrows)
 
 
 def rpy_quaternion(rpy) -> np.ndarray:

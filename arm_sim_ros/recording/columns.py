@@ -40,6 +40,11 @@ def scalars(values):
                    flat.size, flat.size // len(values))
 
 
+def text_lines(lines):
+    """[(text, level)] as a TextLog column set of one line per row."""
+    return rr.TextLog.columns(text=[text for text, _ in lines], level=[level for _, level in lines])
+
+
 def _vertices(points, kind):
     """(..., 2) points as Arrow float32 pairs of `kind`."""
     flat = pa.array(np.ascontiguousarray(points, dtype=np.float32).reshape(-1))

@@ -40,10 +40,10 @@ import numpy as np
 import rerun as rr
 
 from .arm3d import arm3d_for
-from .blueprint import blueprint, effects_document, styles
-from .properties import send_properties
+from .blueprint import blueprint
 from .readouts import Snapshot, error_books, held_by, reads_alike
-from .sinks import check_rrd_file, open_sinks, send_blueprint
+from .sinks import check_rrd_file, open_sinks
+from .static_data import StaticData
 from .writer import BatchWriter
 
 BATCH_STEPS = 20_000             # send at least this often: bounds memory; ~0.1 ms per send_columns
@@ -54,6 +54,7 @@ LIVE_PERIOD = 0.1                # ...and to a viewer, which a person is watchin
 FLUSH_TIMEOUT = 2.0              # wall seconds finish() waits for a sink before giving up on it
 BOOKS_EVERY = 8                  # steps between samples of the error books (see step_batch)
 QUEUED_BATCHES = 8               # batches queued before flush() waits: bounds memory
+SEGMENTS = 1000                  # physics setups in one batch before it is sent: bounds memory
 LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
           "warn": rr.TextLogLevel.WARN, "warning": rr.TextLogLevel.WARN,
           "error": rr.TextLogLevel.ERROR}
@@ -61,9 +62,9 @@ LEVELS = {"debug": rr.TextLogLevel.DEBUG, "info": rr.TextLogLevel.INFO,
 
 class RerunRecorder:
     """A recorder for cli.RUN_RECORDERS and the node: start / step or step_batch / flush /
-    event / finish. start(sim) may be called again after a reset, for a new Simulator
-    (step() also notices a new one) or after a live change (it carries on). Simulated time going back (a reset) continues the
-    timeline from where the last run ended, as the node's JointState stamps do."""
+    event / finish. start(sim) may be called again after a reset, for a new Simulator (step()
+    also notices a new one) or after a live change (it carries on). Simulated time going
+    back (a reset) continues the timeline, as the node's JointState stamps do."""
 
     def __init__(self, scene, path=None, spawn=False, connect=None, application_id="arm_sim",
                  warn=None, stream=None):
@@ -72,11 +73,9 @@ class RerunRecorder:
         self.scene = scene
         self.path, self.spawn, self.connect = path, spawn, connect
         self.live = bool(spawn or connect)
-        self._warn = warn or logging.getLogger(__name__).warning
-        self._warned = set()
+        self._warn, self._warned = warn or logging.getLogger(__name__).warning, set()
         self.stream = stream if stream is not None else rr.RecordingStream(application_id)
-        self.sinks = []           # descriptions of the sinks that opened
-        self.enabled = False
+        self.sinks, self.enabled = [], False   # descriptions of the sinks that opened
         self.sim = None
         self._snapshot = None     # how the steps waiting read: sim's layout when they were taken
         self._dynamics = None     # sim.dynamics then (a payload grasped rebuilds it)
@@ -87,15 +86,18 @@ class RerunRecorder:
         # Wall clock marks [(steps waiting, time.time_ns())] at each look at the clock (log_time),
         # the node's ticks [(row, as the link noted them: story.TickStory)].
         self._walls, self._ticks = [], []
+        # Rows of earlier physics setups in the batch (close_segment), and their count.
+        self._segments, self._segment_rows = [], 0
+        self._static_due = None   # (snap, sim) whose static data is logged at the next send
         self.node = False         # a node's recording: its story per tick, ros_time its stamps
         self.stamp_origin_ns = 0  # ros_time at sim_time 0 (arm-sim run: stamps are sim time)
-        self._static = StaticData()
+        self._static = StaticData(self.live)
         self._check_every = LIVE_CHECK_EVERY if self.live else CHECK_EVERY
         self._check_at = self._check_every
         self._period = LIVE_PERIOD if self.live else FILE_PERIOD
         self._last_send = time.monotonic()
         self._writer = BatchWriter(self.stream)   # the sender thread's: timeline and trace
-        self._layout = None       # what the blueprint was drawn for: Snapshot.key
+        self._layout = None       # what the first blueprint was drawn for: Snapshot.key
         self._sender = SenderThread(self._deliver)
 
     # -- protocol ---------------------------------------------------------------------
@@ -148,18 +150,18 @@ class RerunRecorder:
         Cheap to call once per tick (`sim` is accepted for that protocol; the rows already
         know theirs); step_batch() also calls it every CHECK_EVERY (LIVE_CHECK_EVERY) steps."""
         waiting = self._waiting
-        if waiting and (not self._walls or self._walls[-1][0] != waiting):
-            self._walls.append((waiting, time.time_ns()))   # log_time: rows in between interpolated
-        due = force or waiting >= BATCH_STEPS or time.monotonic() - self._last_send >= self._period
+        mark_wall(self)
+        due = force or waiting + self._segment_rows >= BATCH_STEPS or len(
+            self._segments) >= SEGMENTS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + self._check_every, BATCH_STEPS)
-        if not (waiting or self._events or self._ticks) or not due:
+        if not (waiting or self._events or self._ticks or self._segments) or not due:
             return
-        batch = (self._snapshot, self._runs, self._states, self._events, self._ticks,
-                 self._walls, self._books)
-        self._states, self._books, self._runs, self._events = array("d"), array("d"), [], []
-        self._ticks, self._walls, self._waiting = [], [], 0
-        self._check_at = min(self._check_every, BATCH_STEPS)
+        close_segment(self)
+        batch, self._segments, self._segment_rows = self._segments, [], 0
         self._last_send = time.monotonic()
+        static, self._static_due = self._static_due, None   # the latest setup's, once a send
+        if self.enabled and static is not None:
+            self._guard(self._static.send, self.stream, *static, self.node, self.stamp_origin_ns)
         if self.enabled and not self._sender.put(batch):
             self._warn_once("send", "rerun: the telemetry sender stopped; running on without it")
             self.enabled = False
@@ -197,15 +199,16 @@ class RerunRecorder:
     # -- binding a simulator --------------------------------------------------------------
 
     def _bind(self, sim) -> bool:
-        """Rows buffered so far belong to the previous simulator or dynamics: sent first,
-        unless they read alike. Returns whether sim carries on the run (the same simulator,
+        """Rows buffered so far belong to the previous simulator or dynamics: a segment of
+        the batch of their own (read with their snapshot), unless they read alike. Returns whether sim carries on the run (the same simulator,
         not reset: the run's E(0) kept). Its own events go to the text log."""
         previous = self.sim
         carried = sim is previous and sim.steps + 1 >= self._next
         if carried and _alike_carried_on(self, sim):
             return True
         if previous is not None:
-            self.flush(force=True)
+            close_segment(self)
+            self.flush()        # when due: a held node records no steps, only setups
         initial = self._snapshot.initial if carried and self._snapshot is not None else None
         self.sim, self._dynamics, self._snapshot = sim, sim.dynamics, None
         self._next = sim.steps + carried      # the next step to record
@@ -219,22 +222,17 @@ class RerunRecorder:
         return carried
 
     def _describe(self, sim, initial=None) -> None:
-        """Open the sinks (first time) and log what does not change from step to step."""
+        """Open the sinks (first time); what does not change from step to step (the layout
+        too) is logged at the next send (StaticData)."""
         snap = self._snapshot = Snapshot(sim, initial)
         snap.arm3d = arm3d_for(sim.scene.links)   # the URDF has no payload
-        layout = snap.key
         if self._layout is None:
-            board = blueprint(snap, self.live, self.node)
-            if open_sinks(self.stream, board, self.sinks, self._warn_once, path=self.path,
-                          spawn=self.spawn, connect=self.connect):
+            self._layout = self._static.drawn(snap)   # the default blueprint: drawn here
+            if open_sinks(self.stream, blueprint(snap, self.live, self.node), self.sinks,
+                          self._warn_once, path=self.path, spawn=self.spawn, connect=self.connect):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
-        elif layout != self._layout and self.enabled:
-            send_blueprint(self.stream, blueprint(snap, self.live, self.node))
-        self._layout = layout
-        if not self.enabled:
-            return
-        self._static.send(self.stream, snap, sim, self.node, self.stamp_origin_ns)
+        self._static_due = (snap, sim)
 
     # -- sending ------------------------------------------------------------------------
 
@@ -242,7 +240,7 @@ class RerunRecorder:
         """In the sender thread: each batch in the order flush() queued it."""
         if self.enabled:
             with np.errstate(all="ignore"):   # as in the core: an absurd state's E is inf
-                self._guard(self._writer.send, *batch)
+                self._guard(self._writer.send_batch, batch)
 
     # -- failures -----------------------------------------------------------------------
 
@@ -261,46 +259,40 @@ class RerunRecorder:
             self._warn(message)
 
 
+def mark_wall(recorder: RerunRecorder) -> None:
+    """log_time: the wall clock now at the rows waiting (rows in between interpolated)."""
+    if recorder._waiting and (not recorder._walls or recorder._walls[-1][0] != recorder._waiting):
+        recorder._walls.append((recorder._waiting, time.time_ns()))
+
+
+def close_segment(recorder: RerunRecorder) -> None:
+    """The rows waiting (read with the snapshot now) join the batch's segments: a physics
+    setup's rows, sent with the others of the batch (writer.BatchWriter.send_batch)."""
+    r = recorder
+    mark_wall(r)
+    if r._waiting or r._events or r._ticks:
+        r._segments.append((r._snapshot, r._runs, r._states, r._events, r._ticks, r._walls,
+                            r._books))
+    r._segment_rows += r._waiting
+    r._states, r._books, r._runs, r._events = array("d"), array("d"), [], []
+    r._ticks, r._walls, r._waiting = [], [], 0
+    r._check_at = min(r._check_every, BATCH_STEPS)
+
+
 def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
     """A live change its rows do not show (readouts.reads_alike: damping, friction values):
     the batch being filled goes on under the new snapshot, with no send of its own (a
     slider at 100 changes/s would otherwise send ~20 small chunks per change, and rerun
-    keeps an index entry per chunk until the file closes). The static data follows."""
+    keeps an index entry per chunk until the file closes). The static data follows at
+    the next send."""
     if recorder._snapshot is None:
         return False
     snap = Snapshot(sim, recorder._snapshot.initial)
     if not reads_alike(recorder._snapshot, snap):
         return False
     snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
-    if recorder.enabled:
-        recorder._guard(recorder._static.send, recorder.stream, snap, sim, recorder.node,
-                        recorder.stamp_origin_ns)
+    recorder._static_due = (snap, sim)
     return True
-
-
-class StaticData:
-    """What a recording logs static (series styles, the scene as data, the 3D arm), logged
-    again only where it changed: a live change (100/s from a slider or a fuzzer) must not
-    grow the file and rerun's memory by a mesh each time."""
-
-    def __init__(self):
-        self._sent = {}           # kind -> what it was last logged from
-
-    def send(self, stream, snap, sim, node: bool, stamp_origin_ns) -> None:
-        if self._changed("styles", (snap.key, effects_document(snap))):
-            for path, archetypes in styles(snap, node):
-                stream.log(path, *archetypes, static=True)
-        if self._changed("properties", (sim.scene, snap.key)):   # a reset keeps them
-            send_properties(stream, snap, sim, stamp_origin_ns, node)
-        if snap.arm3d is not None and self._changed(
-                "arm3d", (snap.arm3d, snap.arm, sim.scene.gravity, snap.drives)):
-            snap.arm3d.log_static(stream, snap.arm, sim.scene.gravity, snap.drives)
-
-    def _changed(self, kind: str, source) -> bool:
-        if self._sent.get(kind) == source:
-            return False
-        self._sent[kind] = source
-        return True
 
 
 class SenderThread:

@@ -57,10 +57,13 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     Python call per step costs more than logging's 10 % budget; `books`: the error books
     of every books_every-th step (the least of the recorders'), as
     telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
-    Between chunks (about every CHECK_PERIOD s) it reports progress and honours `stop`
-    (its .requested set by a signal): every recorder has then seen the same last step.
+    Between chunks (about every CHECK_PERIOD s) it reports progress; `stop` (its .requested
+    set by a signal) ends the run at the last whole step, even within a step
+    (whole_steps.py): every recorder has then seen the same last step.
     A step reaches the recorders only once the divergence check has confirmed it; steps it
     retracts never do (tools/confirmed.py). Returns the largest |residual| seen."""
+    from .whole_steps import WholeSteps   # the simulator's module: imported with the work
+
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
     # rows are held until the divergence check confirms them (tools/confirmed.py)
@@ -69,11 +72,15 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
 
     largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
     end = sim.time + duration
+    # a stop ends even a step under way (whole_steps.py); the compiled runs (extra `fast`,
+    # no recorder) are stopped between them
+    whole = WholeSteps(sim, stop) if stop is not None and (recorders or sim.kernel is None) else None
     while left > 0 and not (stop is not None and stop.requested):
         count = min(left, chunk)
         started = time.perf_counter()
-        largest = max(largest, sim.run(count * sim.step_size,
-                                       steps.on_step if recorders else None))
+        on_step = steps.on_step if recorders else None
+        largest = max(largest, whole.run(count, on_step) if whole is not None
+                      else sim.run(count * sim.step_size, on_step))
         steps.hand_over(batched)
         left -= count
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
