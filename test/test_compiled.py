@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from arm_sim_ros.physics import compiled
-from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 pytest.importorskip("numba")
@@ -96,3 +96,11 @@ def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure():
     path = Path(module.__file__)
     assert path.name == f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}.py"
     assert path.read_text() == source and math.isfinite(sims[1].state[0])
+
+
+def test_every_preset_without_a_servo_takes_the_compiled_path():
+    """Clamps' MIN and MAX are functions, not constants: their scenes compile too."""
+    for name in preset_names():
+        scene = load_scene(name)
+        expected = "python" if scene.servo is not None else "compiled (numba)"
+        assert Simulator(scene).path == expected, name

@@ -281,9 +281,10 @@ class Steps:
 
 def compilable(dynamics, step) -> bool:
     """numba on, a fixed step, and every constant the rhs reads a number (a servo's
-    set-points are a list the node changes: Python's path)."""
+    set-points are a list the node changes: Python's path; MIN and MAX, the clamps'
+    functions, become min and max)."""
     values = dynamics.function.__globals__
-    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source))
+    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source)) - {"MIN", "MAX"}
     return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
             and all(isinstance(values.get(n, 0.0), (int, float)) for n in names))
 
