@@ -73,6 +73,17 @@ def test_the_compiled_run_leaves_the_books_as_python_leaves_them(name, monkeypat
         fast.accuracy.shadow.last is fast.state)
 
 
+def test_a_smooth_run_is_one_compiled_call_until_something_is_to_be_said(monkeypatch):
+    """The checks and the divergence checks are in the compiled loop: Python takes no step
+    of a run where nothing is retaken, raised or refused."""
+    sim = Simulator(load_scene("moving_gravity_compensation"))
+    taken = []
+    monkeypatch.setattr(sim, "step", lambda: taken.append(sim.steps))
+    sim.run(3.0)
+    assert taken == [] and sim.steps == 300 and sim.confirmed
+    assert not [e for e in sim.events if e.kind in ("substepping", "accuracy", "fault")]
+
+
 def test_a_payload_grasped_between_runs_goes_on_from_the_same_books(monkeypatch):
     python, fast = python_and_compiled(SCENES["release"], monkeypatch)
     for sim in (python, fast):
