@@ -69,10 +69,12 @@ def time_run(scene, seconds: float, repeat: int, fast: bool):
     return fastest(run, repeat), sim.path, first
 
 
-def time_limit(scene, seconds: float, repeat: int) -> float:
+def time_limit(scene, seconds: float, repeat: int):
     """The bare compiled RK4 loop on the scene's rhs (compiled.bare: steps, nothing else)."""
     sim = simulator(scene, False)
     dynamics = build_dynamics(scene)
+    if not compiled.compilable(dynamics, sim._step):   # a servo's set-points: Python's path
+        return None
     source, names = compiled.module_source(dynamics, sim._step)
     module = compiled.load(source)
     command = compiled.constants_of(names, {**dynamics.function.__globals__,
@@ -118,8 +120,9 @@ def presets_table(seconds: float, repeat: int) -> list[str]:
         per = lambda t: f"{t / seconds * 1e6:>9.0f}" if t is not None else f"{'-':>9}"
         rate = lambda t: f"{steps / t:>9.3g}" if t is not None else f"{'':>9}"
         sub = Simulator(scene).substeps
+        ratio = lambda a, b: f"{a / b:>7.1f}x" if b else f"{'-':>8}"
         lines.append(f"{name:<30}{scene.step_size:>7g}{sub:>4} {per(py)} {per(fast)} {per(theirs)}"
-                     f"{per(limit)[1:]} {py / fast:>7.1f}x {fast / limit:>7.1f}x  "
+                     f"{per(limit)[1:]} {py / fast:>7.1f}x {ratio(fast, limit)}  "
                      f"{'compiled' if 'numba' in path else 'python'} {first:.2f} s {why}")
         lines.append(f"{'':<41} {rate(py)} {rate(fast)} {rate(theirs)}{rate(limit)[1:]}")
     return lines

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from arm_sim_ros.physics import compiled
-from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 pytest.importorskip("numba")
@@ -21,6 +21,11 @@ SCENES = {
         integrator="exponential_rk4", initial_velocities=(1.0, -2.0)),
     "payload_damping_command": load_scene("payload_release").replace(
         damping=(0.3, 0.1), policy="command_gravity_compensation"),
+    # steps retaken, counts raised and lowered, the estimate lost: each said by Python
+    "release_tight": load_scene("release").replace(tolerance=1e-8),
+    "release_tolerance_off": load_scene("release").replace(tolerance=0.0),
+    "springs_fast_spin": load_scene("springs_oscillation").replace(
+        initial_velocities=(30.0, -40.0)),
 }
 
 
@@ -44,6 +49,59 @@ def test_compiled_run_equals_python_run_bit_for_bit(name, monkeypatch):
         assert python.accumulated_error == fast.accumulated_error      # the shadow's too
         assert python.error_estimate == fast.error_estimate
         assert python.substeps_taken == fast.substeps_taken
+
+
+def books(sim):
+    """Everything the error books, the shadow and the divergence check carry on."""
+    b, shadow = sim.accuracy, sim.accuracy.shadow
+    return (sim.state, sim.steps, sim._sound, sim.energy_in_play, sim.fault, sim.books_fault,
+            sim.diverged, b.due, b.since, b.every, b.substeps, b.booked_taken, b.free.previous,
+            b.most, b.capped, b.cap, b.error_estimate, shadow.local, shadow.offset,
+            shadow.shadow, shadow.largest, shadow.lost, [(e.t, e.message) for e in sim.events])
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_the_compiled_run_leaves_the_books_as_python_leaves_them(name, monkeypatch):
+    """The checks, the controller's counts, the schedule and the divergence checks run in
+    the compiled loop; what they carry on, and what they say, is Python's."""
+    python, fast = python_and_compiled(SCENES[name], monkeypatch)
+    for duration in (0.64, 1.28, 0.05):    # ends on a divergence check, and between
+        python.run(duration)
+        fast.run(duration)
+        assert books(python) == books(fast)
+    assert (python.accuracy.shadow.last is python.state) == (
+        fast.accuracy.shadow.last is fast.state)
+
+
+def test_a_smooth_run_is_one_compiled_call_until_something_is_to_be_said(monkeypatch):
+    """The checks and the divergence checks are in the compiled loop: Python takes no step
+    of a run where nothing is retaken, raised or refused."""
+    sim = Simulator(load_scene("moving_gravity_compensation"))
+    taken = []
+    monkeypatch.setattr(sim, "step", lambda: taken.append(sim.steps))
+    sim.run(3.0)
+    assert taken == [] and sim.steps == 300 and sim.confirmed
+    assert not [e for e in sim.events if e.kind in ("substepping", "accuracy", "fault")]
+
+
+def test_a_payload_grasped_between_runs_goes_on_from_the_same_books(monkeypatch):
+    python, fast = python_and_compiled(SCENES["release"], monkeypatch)
+    for sim in (python, fast):
+        sim.run(0.3)
+        sim.set_payload(0.8)
+        sim.run(0.5)
+    assert books(python) == books(fast)
+
+
+def test_books_that_do_not_close_are_found_at_the_check_python_finds_them_at(monkeypatch):
+    """A step too coarse for a 30 rad/s spin (tolerance off): the divergence check, every
+    64 steps, finds the books off at the same step on both paths, and says it once."""
+    scene = load_scene("springs_oscillation").replace(
+        step_size=0.05, tolerance=0.0, initial_velocities=(30.0, -30.0))
+    python, fast = python_and_compiled(scene, monkeypatch)
+    assert python.run(20.0) == fast.run(20.0)
+    assert python.books_fault.startswith("at t = 3.2 s the energy books do not close")
+    assert books(python) == books(fast)
 
 
 def test_a_run_with_a_per_step_callback_sees_every_step_and_ends_in_the_same_state(monkeypatch):
@@ -96,3 +154,11 @@ def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure():
     path = Path(module.__file__)
     assert path.name == f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}.py"
     assert path.read_text() == source and math.isfinite(sims[1].state[0])
+
+
+def test_every_preset_without_a_servo_takes_the_compiled_path():
+    """Clamps' MIN and MAX are functions, not constants: their scenes compile too."""
+    for name in preset_names():
+        scene = load_scene(name)
+        expected = "python" if scene.servo is not None else "compiled (numba)"
+        assert Simulator(scene).path == expected, name

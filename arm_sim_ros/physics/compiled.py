@@ -4,10 +4,12 @@ The right-hand side (dynamics.py) and the step (integrators.py) are plain Python
 they are written once more into a module file named by the hash of that text, with three
 changes: the command the policies read becomes an argument K (a float array: the command,
 then, for Batch, the constants that vary per arm), f(...) becomes rhs(..., K), and every
-function is numba.njit(cache=True). A loop around them advances k plain steps (the planned
-equal sub-steps each) and keeps the largest |energy balance residual|, as Simulator.run
-does step by step; another advances every arm of a Batch, arms in parallel. A switching
-scene's modes (events.py) each get their rhs compiled with the step when first met.
+function is numba.njit(cache=True). A loop around them (kernels.run_books) takes what
+Simulator.run takes step by step on a smooth scene: the planned sub-steps, the error
+books' shadow and checks, the divergence checks and the largest |energy balance residual|,
+handing back to Python each step where something is to be said; another advances every arm
+of a Batch, arms in parallel. A switching scene's modes (events.py) each get their rhs
+compiled with the step when first met.
 
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit
@@ -25,9 +27,10 @@ import re
 import sys
 from pathlib import Path
 
-from . import guard, integrators
+from . import accuracy, controller, guard, integrators, shadow
+from .controller import SAFETY
 from .kernels import KERNELS
-from .shadow import LOST
+from .scene import MAX_INITIAL_ANGLE
 
 try:                      # the optional extra: pip install -e '.[fast]'
     import numba
@@ -61,6 +64,13 @@ def _limit_energy(e, arm):
 
 
 STORED["joint_limits"] = _limit_energy
+# What run_books writes in from the books' modules (kernels.py): the same numbers.
+BOOKS_CONSTANTS = {**{n: getattr(controller, n) for n in ("KI", "KP", "KEEP", "SAFETY",
+                                                          "MAX_GROWTH", "MAX_SHRINK")},
+                   **{n: getattr(shadow, n) for n in ("ROUGH", "SMOOTH", "MIN_EVERY",
+                                                      "MAX_EVERY", "LOST")},
+                   **{n: getattr(guard, n) for n in ("CHECK_EVERY", "FLOOR", "BOOKS_FRACTION")},
+                   "MAX_ANGLE": MAX_INITIAL_ANGLE}
 STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
 
 
@@ -103,9 +113,10 @@ def step_source(step, names) -> str:
 
 
 def energy_source(dynamics):
-    """(source, values): residual(y, K, E0, R0, R1) as Simulator.residual computes it, its
-    constants read from K[2:] in the order of `values`; None where an effect's stored
-    energy has no compiled form."""
+    """(source, values): energy(y, K), residual(y, K, E0, R0, R1) and inputs(y, R0) as
+    Simulator.energy, .residual and the sum of its input channels compute them (njit),
+    their constants read from K[2:] in the order of `values`; None where an effect's
+    stored energy has no compiled form."""
     arm, terms = dynamics.arm, []
     values = list(arm.mass_constants)
     for effect in dynamics.active:
@@ -117,19 +128,28 @@ def energy_source(dynamics):
             return None
     width = 4 + len(dynamics.extra) + len(dynamics.channels)
     first = 4 + len(dynamics.extra)
-    inputs = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "input"]
-    losses = [f"s{first + i}" for i, k in enumerate(dynamics.channel_kinds) if k == "loss"]
+    inputs = "".join(f" + s{first + i}" for i, k in enumerate(dynamics.channel_kinds)
+                     if k == "input")
+    losses = "".join(f" + s{first + i}" for i, k in enumerate(dynamics.channel_kinds)
+                     if k == "loss")
     extra = "".join(f"    x{k} = s{4 + k}\n" for k in range(len(dynamics.extra)))
     reads = "".join(f"    EC{n} = K[{2 + n}]\n" for n in range(len(values)))
     stored = "0.0" + "".join(f" + {t}" for t in terms)
-    return (f"def residual(y, K, E0, R0, R1):\n    {_signature(width)}, = y\n{reads}"
-            f"    q1, q2, u1, u2 = s0, s1, s2, s3\n{extra}"
+    body = (f"    {_signature(width)}, = y\n{reads}    q1, q2, u1, u2 = s0, s1, s2, s3\n{extra}"
             f"    c2 = cos(q2)\n    m11 = EC0 + 2.0 * EC1 * c2\n    m12 = EC2 + EC1 * c2\n"
             f"    kinetic = 0.5 * (m11 * u1 * u1 + 2.0 * m12 * u1 * u2 + EC3 * u2 * u2)\n"
-            f"    stored = {stored}\n"
-            f"    work = R0{''.join(' + ' + s for s in inputs)}\n"
-            f"    lost = R1{''.join(' + ' + s for s in losses)}\n"
-            f"    return 0.0 + kinetic + stored - E0 - work + lost\n"), values
+            f"    stored = {stored}\n")
+    return (f"@njit(cache=True)\ndef energy(y, K):\n{body}    return 0.0 + kinetic + stored\n\n"
+            f"@njit(cache=True)\ndef residual(y, K, E0, R0, R1):\n{body}"
+            f"    work = R0{inputs}\n    lost = R1{losses}\n"
+            f"    return 0.0 + kinetic + stored - E0 - work + lost\n\n"
+            f"@njit(cache=True)\ndef inputs(y, R0):\n    {_signature(width)}, = y\n"
+            f"    return R0{inputs}\n"), values
+
+
+NO_ENERGY = ("@njit(cache=True)\ndef energy(y, K):\n    return 0.0\n\n"
+             "@njit(cache=True)\ndef residual(y, K, E0, R0, R1):\n    return 0.0\n\n"
+             "@njit(cache=True)\ndef inputs(y, R0):\n    return R0\n")
 
 
 def module_source(dynamics, step, rhs=None):
@@ -142,7 +162,7 @@ def module_source(dynamics, step, rhs=None):
     found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source))
     names = sorted(n for n in found if n in values and isinstance(values[n], (int, float))
                    and not isinstance(values[n], bool))
-    lines = ["from math import cos, sin, exp, isfinite", "from numba import njit, prange", ""]
+    lines = ["from math import ceil, cos, exp, isfinite, sin", "from numba import njit, prange", ""]
     if "COEFFICIENTS" in step.source:    # the exponential step's coefficients, compiled too
         lines += [f"PHI_SERIES = {integrators.PHI_SERIES!r}",
                   "@njit(cache=True)\n" + inspect.getsource(integrators.phi),
@@ -150,13 +170,13 @@ def module_source(dynamics, step, rhs=None):
                   "COEFFICIENTS = exponential_rk4"]
     width = 4 + len(dynamics.extra) + len(dynamics.channels)
     energy = energy_source(dynamics)
-    residual = energy[0] if energy else "def residual(y, K, E0, R0, R1):\n    return 0.0\n"
-    for function in (rhs_source(rhs, names), step_source(step, names), residual):
+    for function in (rhs_source(rhs, names), step_source(step, names)):
         lines += ["@njit(cache=True)", function]
+    lines.append(energy[0] if energy else NO_ENERGY)
     lines.append(KERNELS.format(items=", ".join(f"y[{k}]" for k in range(width)),
                                 zitems=", ".join(f"z[{k}]" for k in range(width)),
                                 columns=", ".join(f"Y[{k}, a]" for k in range(width)),
-                                width=width))
+                                width=width, **BOOKS_CONSTANTS))
     return "\n".join(lines) + "\n", names
 
 
@@ -187,8 +207,8 @@ def load(source: str):
 
 
 class Kernel:
-    """A simulator's compiled runs of plain steps and its compiled energy residual
-    (Simulator.run without a per-step callback calls `run`)."""
+    """A simulator's compiled Simulator.run (kernels.run_books: its steps, the shadow, the
+    error books' checks and the divergence checks in one call) and its compiled residual."""
 
     path = "compiled (numba)"
 
@@ -200,51 +220,74 @@ class Kernel:
         self.K = constants_of(names, {**dynamics.function.__globals__,
                                       **getattr(step, "constants", {})})
         self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
-        self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
-        self.z, self.L = np.zeros(len(self.y)), np.zeros(len(self.y))
-        self.command = dynamics.command
+        width = 4 + len(dynamics.extra) + len(dynamics.channels)
+        self.y, self.z, self.L, self.O, self.G, self.S = (np.zeros(width) for _ in range(6))
+        self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(15)
+        self.command, self.lowest = dynamics.command, None
 
     def run(self, sim, left: int, largest: float):
-        """(steps taken, largest |residual|) of Simulator.run without a callback: plain
-        steps in one call, up to the accuracy books' next check (`due`) and the next
-        divergence check; else (a check due, a switching scene, diverged, a step that would
-        not be finite) one Simulator.step, its residual compiled."""
-        books = sim.accuracy
-        if self.plain and not sim.diverged and sim.steps < books.due:
-            count = min(left, books.due - sim.steps,
-                        guard.CHECK_EVERY - sim.steps % guard.CHECK_EVERY)
-            done, largest = self.advance(sim, count, books.substeps, largest)
-            sim.steps += done
-            if done and sim.steps % guard.CHECK_EVERY == 0:
+        """(steps taken, largest |residual|) of Simulator.run without a callback: steps in
+        one compiled call while nothing is to be said; the step Python must take (a switching
+        scene, a driver, a retaken step, a fault ...) as Simulator.step, its residual
+        compiled."""
+        books, done = sim.accuracy, 0
+        if self.plain and not sim.diverged and isinstance(books, accuracy.Accuracy) and \
+                books.stepper is None and books.free.n == books.substeps:
+            done, largest, code = self.books_run(sim, books, left, largest)
+            if code == 2:                 # its divergence check is Python's
                 sim._check_divergence()
-            if done:
+                largest = max(largest, abs(self.residual(sim)))
+            if code != 1 or done == left:
                 return done, largest
         sim.step()
-        self.y[:] = sim.state
-        residual = self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
-        return 1, max(largest, abs(residual))
+        return done + 1, max(largest, abs(self.residual(sim)))
 
-    def advance(self, sim, steps: int, substeps: int, largest: float):
-        """(steps taken, largest |residual| so far) from sim.state; sim.state updated."""
+    def residual(self, sim) -> float:
+        self.y[:] = sim.state
+        return self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
+
+    def books_run(self, sim, books, left: int, largest: float):
+        """kernels.run_books from the simulator's state and books, and back into them."""
+        shadow, I, F, n, h = books.shadow, self.I, self.F, books.states, sim.step_size
         self.K[0], self.K[1] = self.command
-        y, before = self.y, sim.state
-        y[:] = before
-        shadow = getattr(sim.accuracy, "shadow", None)
-        z = shadow.start(before) if shadow is not None else None
-        if z is None:
-            done, largest = self.module.advance(y, sim.step_size, steps, substeps, self.K,
-                                                self.C, sim.initial_energy, *sim.retired, largest)
-            sim.state = tuple(y.tolist())
-            return done, largest
-        self.z[:] = z            # the shadow beside it, step for step (shadow.py)
-        self.L[:shadow.states] = shadow.local
-        done, largest, far, gone = self.module.advance_shadowed(
-            y, self.z, self.L, shadow.states, sim.step_size, steps, substeps, self.K, self.C,
-            sim.initial_energy, *sim.retired, largest, shadow.largest, LOST)
-        sim.state = tuple(y.tolist())
-        if done:
-            shadow.jump(tuple(self.z.tolist()), sim.state, far, gone)
-        return done, largest
+        self.y[:] = sim.state
+        known = shadow.local is not None
+        followed = known and not shadow.lost and sim.state is shadow.last
+        if known:
+            self.L[:n] = shadow.local
+        if followed:
+            self.z[:] = shadow.shadow
+        self.O[:n] = shadow.offset or [0.0] * n
+        if self.lowest is None:
+            self.lowest = guard.lowest_energy(sim)
+        I[:] = (sim.steps, books.due, books.since, books.booked_taken, books.substeps,
+                books.every, books.free.floor, books.free.cap, books.cap, books.most,
+                books.capped, n, books.order, known, followed, shadow.lost,
+                books.said_lost or books.emit is None, sim.books_fault is not None)
+        F[:] = (h, sim.initial_energy, *sim.retired, largest, shadow.largest,
+                sim.energy_in_play, books.error_estimate, books.free.previous, books.tolerance,
+                SAFETY * books.target(h), books.target(h), books.factor, self.lowest,
+                float(books.order))
+        done, code, sound = self.module.run_books(self.y, self.z, self.L, self.O, self.G,
+                                                  self.S, I, F, self.K, self.C, left)
+        if not done:
+            return 0, largest, code
+        sim.state = tuple(self.y.tolist())
+        sim.steps, books.due, books.since, books.booked_taken = (int(v) for v in I[:4])
+        if int(I[4]) != books.substeps:
+            books.use(int(I[4]))
+        books.every = int(I[5])
+        books.error_estimate, books.free.previous = float(F[7]), float(F[8])
+        if I[13]:
+            shadow.local = self.L[:n].tolist()
+        if I[14]:
+            shadow.shadow, shadow.offset = tuple(self.z.tolist()), self.O[:n].tolist()
+            shadow.last = sim.state
+        shadow.largest, shadow.lost = float(F[5]), bool(I[15])
+        sim.energy_in_play = float(F[6])
+        if sound >= 0:
+            sim._sound = sim.state if sound == sim.steps else tuple(self.S.tolist())
+        return done, float(F[4]), code
 
 
 class Steps:
@@ -281,9 +324,10 @@ class Steps:
 
 def compilable(dynamics, step) -> bool:
     """numba on, a fixed step, and every constant the rhs reads a number (a servo's
-    set-points are a list the node changes: Python's path)."""
+    set-points are a list the node changes: Python's path; MIN and MAX, the clamps'
+    functions, become min and max)."""
     values = dynamics.function.__globals__
-    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source))
+    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source)) - {"MIN", "MAX"}
     return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
             and all(isinstance(values.get(n, 0.0), (int, float)) for n in names))
 

@@ -1,63 +1,190 @@
-"""The compiled loops of compiled.py as source text: plain steps in one call (with the
-error books' shadow beside them, shadow.py), the bare loop (the compiled limit) and a
-batch of arms. compiled.py fills in the state's entries and compiles them with numba."""
+"""The compiled loops of compiled.py as source text: Simulator.run with its error books
+(run_books), the bare loop (the compiled limit) and a batch of arms. compiled.py fills in
+the state's entries and the books' constants and compiles them with numba.
+
+run_books does what Simulator.step does on a smooth scene, step after step, with the same
+operations in the same order: the planned sub-steps, the shadow beside them (shadow.py),
+the accuracy books' checks on their schedule (accuracy.py: the step doubled, the
+controller's count, the next check) and the divergence check every CHECK_EVERY steps
+(guard.py). Python's max(a, b) keeps a unless b > a: so does `bigger`. Where Python would
+say something (a retaken step, a new count, a lost estimate, a fault, a divergence) it
+stops and leaves that step to Python (code 1: not taken; code 2: taken, its divergence
+check not done).
+"""
 
 KERNELS = '''
 @njit(cache=True)
-def advance(y, h, steps, substeps, K, C, E0, R0, R1, largest):
-    """Up to `steps` plain steps from y (in place); stops before a non-finite one.
-    (steps taken, largest |residual|). No shadow: advance_shadowed with none to follow."""
-    done, largest, far, gone = advance_shadowed(y, y, y, 0, h, steps, substeps, K, C, E0, R0,
-                                                R1, largest, 0.0, -1.0)
-    return done, largest
+def bigger(a, b):
+    return b if b > a else a
 
 
 @njit(cache=True)
-def advance_shadowed(y, z, L, n, h, steps, substeps, K, C, E0, R0, R1, largest, far, lost):
-    """advance, the shadow beside it (shadow.py: z -> step(z) - L on the first n states, the
-    largest |y - z| in `far`, not followed past `lost`; none if `lost` < 0).
-    (done, largest, far, lost or not)"""
+def smaller(a, b):
+    return b if b < a else a
+
+
+@njit(cache=True)
+def substepped(state, h, n, K):
+    """n equal sub-steps of h (stability.substepping); the step itself when 1."""
+    if n == 1:
+        return step(state, h, K)
+    dt = h / n
+    for k in range(n):
+        state = step(state, dt, K)
+    return state
+
+
+@njit(cache=True)
+def finite(state):
+    ok = True
+    for v in state:
+        ok = ok and isfinite(v)
+    return ok and isfinite(state[0] + state[1] + state[2] + state[3])
+
+
+@njit(cache=True)
+def ask(n, ratio, previous, order, floor, cap):
+    """controller.Control.ask after a step of n sub-steps measured at `ratio`:
+    (the count asked for, the ratio kept)."""
+    if not isfinite(ratio):
+        wanted = min(cap, max(floor, ceil(n * {MAX_SHRINK!r})))
+    else:
+        r, p = bigger(ratio, 1e-12), bigger(previous, 1e-12)
+        factor = r ** ({KI!r} / order) * (r / p) ** ({KP!r} / order)
+        w = n * smaller({MAX_SHRINK!r}, bigger(1.0 / {MAX_GROWTH!r}, factor))
+        if w < n and w > {KEEP!r} * n:
+            wanted = n
+        else:
+            wanted = max(floor, min(cap, ceil(w - 1e-9)))
+    if isfinite(ratio):
+        previous = ratio
+    if n <= floor and ratio * {SAFETY!r} <= 1.0:
+        return n, previous
+    return wanted, previous
+
+
+@njit(cache=True)
+def run_books(y, z, L, O, G, S, I, F, K, C, left):
+    """Up to `left` steps of Simulator.step from y (in place), the books in I and F (read
+    and written back; compiled.Kernel names them), the shadow's state z, its local error L
+    and offset O; G scratch, S the state the latest divergence check found sound.
+    (steps taken, code: 0 all taken, 1 the next step is Python's, 2 the last step's
+    divergence check is Python's; the step of the latest sound check or -1)."""
+    steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
+    floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
+    order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
+    h, E0, R0, R1, largest, far, in_play = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
+    estimate, previous, tolerance, den, target = F[7], F[8], F[9], F[10], F[11]
+    factor, lowest, orderf = F[12], F[13], F[14]
     state = ({items},)
     shade = ({zitems},)
-    dt = h / substeps
-    done = 0
-    gone = not lost >= 0.0
-    for m in range(steps):
-        new = step(state, h, K) if substeps == 1 else state
-        if substeps > 1:
-            for k in range(substeps):
-                new = step(new, dt, K)
-        finite = True
-        for v in new:
-            finite = finite and isfinite(v)
-        if not finite:
-            break
+    done, code, sound = 0, 0, -1
+    while done < left:
+        new_every, wanted = every, n
+        if steps < due:                       # a plain step, the shadow beside it
+            new = substepped(state, h, n, K)
+            if not finite(new):
+                code = 1
+                break
+        else:                                 # a check: the step doubled (accuracy.py)
+            new = substepped(state, h, n, K)
+            half = state
+            hs = 0.5 * h / n
+            for k in range(2 * n):
+                half = step(half, hs, K)
+            for k in range(states):
+                G[k] = (new[k] - half[k]) * factor
+            e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
+            scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))),
+                            e3 / (1.0 + abs(new[3])))
+            error = bigger(bigger(bigger(e0, e1), e2), e3)
+            ok = finite(new)
+            for k in range(states):
+                ok = ok and isfinite(G[k])
+            if not ok:
+                code = 1
+                break
+            kept = previous
+            if tolerance != 0.0:
+                wanted, kept = ask(n, scaled / den, previous, order, floor, fcap)
+                if scaled > target and n < cap:           # retaken: Python's
+                    code = 1
+                    break
+                if (wanted >= cap and capped == 0 and scaled > target) or (
+                        wanted > most and wanted > 2 * max(1, most)):   # said: Python's
+                    code = 1
+                    break
+            if known == 1:                    # shadow.next_every
+                change, size = 0.0, 0.0
+                for k in range(4):
+                    change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
+                for k in range(4):
+                    size = bigger(size, abs(G[k])) if k else abs(G[k])
+                for k in range(4):
+                    size = bigger(size, abs(L[k]))
+                if change > {ROUGH!r} * size:
+                    new_every = max({MIN_EVERY!r}, every // 2)
+                elif change < {SMOOTH!r} * size:
+                    new_every = min({MAX_EVERY!r}, 2 * every)
+        # the shadow (shadow.Shadow.follow: from the corrected state, less the local error)
+        local_known = known == 1 or steps >= due
+        now_lost, now_far, now_shade = lost, far, shade
+        if local_known and lost == 0:
+            if zvalid == 0:
+                for k in range({width}):
+                    z[k] = state[k] - O[k] if k < states else state[k]
+                now_shade = ({zitems},)
+            z1 = substepped(now_shade, h, n, K)
+            for k in range({width}):
+                z[k] = z1[k] - (G[k] if steps >= due else L[k]) if k < states else z1[k]
+            now_shade = ({zitems},)
+            o0, o1, o2, o3 = new[0] - z[0], new[1] - z[1], new[2] - z[2], new[3] - z[3]
+            distance = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2)), abs(o3))
+            scaled_off = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2) / (1.0 + abs(new[2]))),
+                                abs(o3) / (1.0 + abs(new[3])))
+            if not scaled_off <= {LOST!r}:
+                now_lost, distance = 1, bigger(far, {LOST!r})
+            now_far = bigger(far, distance)
+        if steps >= due:
+            if now_lost == 1 and said_lost == 0:      # said by the books: Python's
+                code = 1
+                break
+            taken += (n * (steps - since) if n > 1 else 0) + (n if n > 1 else 0)
+            since, estimate, previous = steps + 1, error, kept
+            scale = (n / wanted) ** orderf if wanted != n else 1.0
+            for k in range(states):
+                L[k] = G[k] * scale if wanted != n else G[k]
+            n, every, due, known = wanted, new_every, steps + new_every, 1
+        if local_known and lost == 0:
+            for k in range(states):
+                O[k] = new[k] - z[k]
+            zvalid, shade = 1, now_shade
+        lost, far = now_lost, now_far
         state = new
+        steps += 1
         done += 1
-        r = abs(residual(state, C, E0, R0, R1))
-        if r > largest:
-            largest = r
-        if gone:
-            continue
-        nz = step(shade, h, K) if substeps == 1 else shade
-        if substeps > 1:
-            for k in range(substeps):
-                nz = step(nz, dt, K)
-        shade = nz
-        for k in range({width}):
-            z[k] = shade[k] - L[k] if k < n else shade[k]
-        shade = ({zitems},)
-        o0, o1, o2, o3 = state[0] - z[0], state[1] - z[1], state[2] - z[2], state[3] - z[3]
-        distance = max(abs(o0), abs(o1), abs(o2), abs(o3))
-        scaled = max(abs(o0), abs(o1), abs(o2) / (1.0 + abs(state[2])),
-                     abs(o3) / (1.0 + abs(state[3])))
-        if not scaled <= lost:
-            gone = True
-            distance = max(far, lost)
-        far = max(far, distance)
+        if steps % {CHECK_EVERY!r} == 0:      # guard.divergence and guard.audit
+            r = residual(state, C, E0, R0, R1)
+            expected = E0 - lowest + abs(inputs(state, R0))
+            if not abs(r) <= {FLOOR!r} + bigger(in_play, expected) or not bigger(
+                    abs(state[0]), abs(state[1])) <= {MAX_ANGLE!r}:
+                code = 2
+                break
+            play = bigger(in_play, energy(state, C) - lowest)
+            if fault == 0 and not abs(r) <= {BOOKS_FRACTION!r} * ({FLOOR!r} + bigger(
+                    play, expected)):
+                code = 2
+                break
+            in_play, sound = play, steps
+            for k in range({width}):
+                S[k] = state[k]
+        largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
     for k in range({width}):
-        y[k] = state[k]
-    return done, largest, far, gone
+        y[k], z[k] = state[k], shade[k]
+    I[0], I[1], I[2], I[3], I[4], I[5] = steps, due, since, taken, n, every
+    I[13], I[14], I[15] = known, zvalid, lost
+    F[4], F[5], F[6], F[7], F[8] = largest, far, in_play, estimate, previous
+    return done, code, sound
 
 
 @njit(cache=True)

@@ -89,14 +89,6 @@ class Shadow:
         self.shadow, self.offset, self.last = z1, offset, y1
 
 
-    def jump(self, z1, y1, largest: float, lost: bool) -> None:
-        """The shadow after a compiled run of steps (compiled.py: the same steps): at z1
-        (corrected) beside the motion's y1, the largest distance on the way, lost or not."""
-        n = self.states
-        self.shadow, self.offset, self.last = z1, [a - b for a, b in zip(y1[:n], z1[:n])], y1
-        self.largest, self.lost = largest, self.lost or lost
-
-
 class Twin:
     """The shadow's step on a switching stepper of its own (its modes switch at its own
     times), at the counts the motion's stepper uses."""
