@@ -320,6 +320,32 @@ def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatc
     assert many <= few + 2                     # before: ~25 more per change
 
 
+@pytest.mark.parametrize("change", ["restart", "payload", "controller model"])
+def test_changes_at_every_send_log_the_static_data_once_a_period(tmp_path, monkeypatch, change):
+    """A send at every tick and such a change before each (a restart's new E(0) is in a
+    pane's title): the blueprint, styles and properties go at the first send and when the
+    file closes, not ~70 entries a send (rerun keeps each until the file closes)."""
+    from rerun.chunk import RrdReader
+
+    from arm_sim_ros.recording import static_data, telemetry
+
+    monkeypatch.setattr(telemetry, "FILE_PERIOD", 0.0)          # a send at every tick
+    monkeypatch.setattr(static_data, "STATIC_PERIOD", 1e9)      # none ends in the test
+
+    def static_chunks(changes: int) -> int:
+        path = tmp_path / f"{changes}.rrd"
+        core = core_of(rerun_path=str(path), publish_rate=100.0, policy="gravity_compensation")
+        for i in range(30):
+            if i < changes:
+                SHOWN_CHANGES[change](core, i)
+            core.tick()
+        core.finish()
+        return sum(1 for chunk in RrdReader(str(path)).stream() if chunk.is_static)
+
+    few, many = static_chunks(2), static_chunks(30)
+    assert many <= few + 5                     # before: the static data again every send
+
+
 def test_a_recording_draws_an_absurd_accepted_value_without_a_python_warning(tmp_path, recwarn):
     """Gravity 1e200 is accepted (the arm holds, faulted); the 3D arm's gravity arrow is
     drawn at the arm's reach, and nothing overflows rerun's float32 on the way."""

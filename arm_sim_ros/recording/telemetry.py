@@ -88,7 +88,6 @@ class RerunRecorder:
         self._walls, self._ticks = [], []
         # Rows of earlier physics setups in the batch (close_segment), and their count.
         self._segments, self._segment_rows = [], 0
-        self._static_due = None   # (snap, sim) whose static data is logged at the next send
         self.node = False         # a node's recording: its story per tick, ros_time its stamps
         self.stamp_origin_ns = 0  # ros_time at sim_time 0 (arm-sim run: stamps are sim time)
         self._static = StaticData(self.live)
@@ -154,14 +153,14 @@ class RerunRecorder:
         due = force or waiting + self._segment_rows >= BATCH_STEPS or len(
             self._segments) >= SEGMENTS or time.monotonic() - self._last_send >= self._period
         self._check_at = min(waiting + self._check_every, BATCH_STEPS)
-        if not (waiting or self._events or self._ticks or self._segments) or not due:
+        if not (waiting or self._events or self._ticks or self._segments
+                or force and self._static.due) or not due:
             return
         close_segment(self)
         batch, self._segments, self._segment_rows = self._segments, [], 0
         self._last_send = time.monotonic()
-        static, self._static_due = self._static_due, None   # the latest setup's, once a send
-        if self.enabled and static is not None:
-            self._guard(self._static.send, self.stream, *static, self.node, self.stamp_origin_ns)
+        if self.enabled:                    # the latest setup's, where it changed
+            self._guard(self._static.send, self.stream, self.node, self.stamp_origin_ns, force)
         if self.enabled and not self._sender.put(batch):
             self._warn_once("send", "rerun: the telemetry sender stopped; running on without it")
             self.enabled = False
@@ -232,7 +231,7 @@ class RerunRecorder:
                           self._warn_once, path=self.path, spawn=self.spawn, connect=self.connect):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
-        self._static_due = (snap, sim)
+        self._static.due = (snap, sim)
 
     # -- sending ------------------------------------------------------------------------
 
@@ -291,7 +290,7 @@ def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
     if not reads_alike(recorder._snapshot, snap):
         return False
     snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
-    recorder._static_due = (snap, sim)
+    recorder._static.due = (snap, sim)
     return True
 
 

@@ -78,9 +78,13 @@ def cs_id(participant_guid: bytes, counter: int) -> str:
 
 
 def _matched_subscriptions(writer) -> list:
+    return _matched(writer.get_matched_subscriptions)
+
+
+def _matched(handles) -> list:
     for _ in range(100):   # cyclonedds-python 11.0.1 races a match arriving mid-copy (IndexError)
         try:
-            return writer.get_matched_subscriptions()
+            return handles()
         except IndexError:
             continue
     return []
@@ -102,6 +106,7 @@ class ServiceEndpoint:
             qos=endpoint_qos(reply_type, depth, user_data))
         self.request_type = request_type
         self.condition = ReadCondition(self.reader, _ANY)
+        self._matches, self._ready = None, set()   # client_state's: clients ready while matched
 
     def take(self, log=None) -> list:
         """(reply, the asking writer's instance handle) for every request waiting. A request
@@ -130,7 +135,21 @@ class ServiceEndpoint:
 
     def client_state(self, client_writer: int) -> str:
         """'ready' when the reply writer has matched the reader of the client whose request
-        writer is `client_writer`, 'gone' when that writer has left, else 'waiting'."""
+        writer is `client_writer`, 'gone' when that writer has left, else 'waiting'. A ready
+        client stays ready while the matches stand: cyclonedds-python 11.0.1 leaks ~100 B
+        per get_matched_*_data (~0.4 kB a request, without end under 200 sets/s)."""
+        matches = (tuple(_matched(self.reader.get_matched_publications)),
+                   tuple(_matched_subscriptions(self.writer)))
+        if matches != self._matches:
+            self._matches, self._ready = matches, set()
+        if client_writer in self._ready:
+            return "ready"
+        state = self._client_state(client_writer)
+        if state == "ready":
+            self._ready.add(client_writer)
+        return state
+
+    def _client_state(self, client_writer: int) -> str:
         try:
             writer = self.reader.get_matched_publication_data(client_writer)
         except Exception:        # noqa: BLE001 - cyclonedds raises for a handle it no longer knows
