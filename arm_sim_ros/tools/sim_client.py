@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import time
 
-from ..node import messages as msg    # first: it checks the process before cyclonedds loads
-
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ..interface import SETPOINT_TOPICS
+from ..node import messages as msg
 from ..node import simulation as s
 from ..node.transports import dds_simulation as d
 from ..node.transports.dds_services import cs_id, endpoint_qos
