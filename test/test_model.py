@@ -128,6 +128,16 @@ def test_impossible_arms_are_refused(kwargs, message):
         ArmParameters(**kwargs)
 
 
+@pytest.mark.parametrize("lengths, payload", [((1e-12, 1e200), 7.0), ((1.0, 1e160), 1e200),
+                                               ((1.0, 1e200), 1e308)])
+def test_a_payload_folded_beyond_the_doubles_is_refused_in_the_physics_words(lengths, payload):
+    # (length - com)^2 raises OverflowError past the doubles; a product gives inf instead
+    arm = ArmParameters(link_lengths=lengths, com_distances=(0.5, 0.5))
+    with pytest.raises(ParameterError, match="payload of .* kg at the tip of link 2 .* beyond "
+                                             "double precision"):
+        arm.with_payload(payload)
+
+
 def test_point_mass_links_are_allowed():
     arm = ArmParameters(com_distances=(1.0, 1.0), com_inertias=(0.0, 0.0))
     m11, m12, m22 = model.mass_matrix(arm, (0.0, 0.0))

@@ -6,7 +6,7 @@ import math
 import random
 import time
 
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from arm_sim_ros import interface
 from arm_sim_ros.node import core as node_core, parameters as node_params, messages as msg
@@ -115,6 +115,7 @@ parameter_changes = st.lists(
 @settings(max_examples=200, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(changes=parameter_changes)
+@example(changes={"real_time_factor": 0.0, "publish_rate": 5e-324})  # rate x step underflowed
 def test_fuzzed_parameters_are_refused_with_nothing_changed_or_run_finite(changes):
     core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 0.5}),
                                 logging.getLogger("fuzz"), FakeClock())

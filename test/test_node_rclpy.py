@@ -218,3 +218,24 @@ def test_a_dds_transport_node_started_first_is_found_by_a_later_rclpy_peer(monke
         process.kill()
     assert process.returncode == 0, err
     assert "torque command [1.0, 0.0] N m" in err and "refused" not in err
+
+
+@pytest.mark.parametrize("ros", [29], indirect=True)
+def test_a_set_the_core_cannot_apply_is_refused_and_the_node_goes_on(ros, monkeypatch):
+    """A rebuild that raises (here an overflow, as a payload of 1e200 kg far out on the arm
+    once did) is answered as refused, as on dds, instead of ending the node through spin."""
+    make_node, peer = ros
+    node = make_node()
+
+    def overflow(changes):
+        raise OverflowError(34, "Numerical result out of range")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(node.core, "set_parameters", overflow)
+        result = node.set_parameters([Parameter("damping", value=0.3)])[0]
+    assert not result.successful
+    assert result.reason == ("parameters damping refused: the node could not apply them "
+                             "(OverflowError); nothing changed")
+    assert node.set_parameters([Parameter("damping", value=0.3)])[0].successful
+    node.on_tick()
+    peer.spin_until(lambda: peer.joint_states)

@@ -16,17 +16,22 @@ import sys
 from dataclasses import dataclass, field
 from xml.sax.saxutils import escape, quoteattr
 
-from cyclonedds.core import DDSException
-from cyclonedds.domain import Domain, DomainParticipant
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.annotations import final
-from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
-from cyclonedds.qos import Policy, Qos
-from cyclonedds.util import duration
+from .one_cyclone import refuse_foreign_cyclone
 
-from .cdr import LITTLE_ENDIAN, joint_state_cdr
-from .wire_errors import (DiscoveryError, check_topic_name, cyclone_messages, cyclone_reason,
-                          refused_configuration, static_peers)
+refuse_foreign_cyclone()    # before cyclonedds loads (and binds) its C library
+
+from cyclonedds.core import DDSException  # noqa: E402
+from cyclonedds.domain import Domain, DomainParticipant  # noqa: E402
+from cyclonedds.idl import IdlStruct  # noqa: E402
+from cyclonedds.idl.annotations import final  # noqa: E402
+from cyclonedds.idl.types import (array, bounded_str, float64, int32, sequence,  # noqa: E402
+                                  uint8, uint32)
+from cyclonedds.qos import Policy, Qos  # noqa: E402
+from cyclonedds.util import duration  # noqa: E402
+
+from .cdr import LITTLE_ENDIAN, joint_state_cdr  # noqa: E402
+from .wire_errors import (DiscoveryError, check_topic_name, cyclone_messages,  # noqa: E402
+                          cyclone_reason, refused_configuration, static_peers)
 
 
 # --- builtin_interfaces / rosgraph_msgs / std_msgs ---------------------------------------

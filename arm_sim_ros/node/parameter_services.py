@@ -123,8 +123,7 @@ class ParameterServices:
             return self._refused(str(refusal))
         except Exception as error:   # noqa: BLE001 - a bug must not leave a client unanswered
             self.log.error(f"set_parameters {names}: {type(error).__name__}: {error}")
-            return self._refused(f"parameters {', '.join(names)} refused: the node could not "
-                                 f"apply them ({type(error).__name__}); nothing changed")
+            return self._refused(could_not_apply(names, error))
         if self.on_set is not None:
             self.on_set(list(dict.fromkeys(names)))
         return SetResult(True)
@@ -138,3 +137,10 @@ class ParameterServices:
         """std_srvs/srv/Trigger on ~/reset: (success, message), as the rclpy transport says it."""
         self.core.reset()
         return True, f"scene {self.core.config.scene.name} restarted from its initial state"
+
+
+def could_not_apply(names, error: Exception) -> str:
+    """The refusal when applying raised something other than a refusal (a bug in the physics
+    rebuild): the client is answered and the node goes on, on both transports."""
+    return (f"parameters {', '.join(names)} refused: the node could not apply them "
+            f"({type(error).__name__}); nothing changed")

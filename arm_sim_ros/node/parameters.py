@@ -381,7 +381,11 @@ def _check_node_values(values: dict) -> None:
 
 
 def steps_per_tick(rate: float, step_size: float) -> int:
-    exact = 1.0 / (rate * step_size)
+    exact = 1.0 / rate / step_size     # rate * step_size can underflow to 0 (a rate of 5e-324)
+    if exact == float("inf"):
+        raise ParameterRefused("publish_rate", f"{rate:g} Hz with step_size {step_size:g} s "
+                               f"is more steps per tick than a double holds; at most "
+                               f"{MAX_STEPS_PER_TICK}")
     steps = round(exact)
     if steps < 1 or abs(steps - exact) > 1e-9 * exact:
         raise ParameterRefused(

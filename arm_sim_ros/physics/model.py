@@ -111,8 +111,17 @@ class ArmParameters:
         combined mass, its centre of mass and its inertia about that centre."""
         if mass == 0.0:
             return self
-        total, com, inertia = fold_payload(self.link_lengths[1], self.link_masses[1],
-                                           self.com_distances[1], self.com_inertias[1], mass)
+        try:
+            folded = fold_payload(self.link_lengths[1], self.link_masses[1],
+                                  self.com_distances[1], self.com_inertias[1], mass)
+        except OverflowError:      # a square past the doubles raises, a product gives inf
+            folded = (float("inf"),) * 3
+        if not all(isfinite(v) for v in folded):
+            raise ParameterError(f"a payload of {mass:g} kg at the tip of link 2 "
+                                 f"({self.link_lengths[1]:g} m, {self.link_masses[1]:g} kg) "
+                                 "gives a mass, centre of mass or inertia beyond double "
+                                 "precision; use values at a robot's scale")
+        total, com, inertia = folded
         return replace(self, link_masses=(self.link_masses[0], total),
                        com_distances=(self.com_distances[0], com),
                        com_inertias=(self.com_inertias[0], inertia))

@@ -22,6 +22,7 @@ from std_srvs.srv import Trigger
 from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
+from ..parameter_services import could_not_apply
 from ..parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused, resolve_parameters,
                           scene_defaults)
 from ..schedule import TickSchedule
@@ -158,6 +159,10 @@ class ArmSimNode(Node):
         except ParameterRefused as refusal:
             self.get_logger().warning(str(refusal))
             return SetParametersResult(successful=False, reason=str(refusal))
+        except Exception as error:   # noqa: BLE001 - raised through rclpy's spin, it ended the node
+            self.get_logger().error(f"set_parameters {list(changes)}: "
+                                    f"{type(error).__name__}: {error}")
+            return SetParametersResult(successful=False, reason=could_not_apply(changes, error))
         if {"publish_rate", "real_time_factor"} & set(changed):      # the wall period
             self.destroy_timer(self.tick_timer)
             self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer)
