@@ -97,6 +97,20 @@ def test_a_live_change_from_a_refused_plan_is_refused_whole_or_taken_whole():
     assert all(finite(core.tick()) for _ in range(5))
 
 
+def test_a_held_node_takes_a_sound_value_again_without_a_reset():
+    """Damping 1e200 holds the arm (every step refused: its books have no shadow) until a
+    reset; setting damping back to a sound value meanwhile is taken, with fresh books,
+    where it was once refused ("could not be carried over", found on rclpy)."""
+    core = core_of(damping=0.5)
+    core.set_parameters({"damping": 1e200})
+    held = core.tick()
+    assert core.set_parameters({"damping": 0.3}) == ["damping"]
+    assert core.sim.scene.damping == 0.3 and finite(core.tick())
+    core.reset()
+    moved = [core.tick() for _ in range(5)]
+    assert all(finite(m) for m in moved) and moved[-1].position != held.position
+
+
 @pytest.mark.parametrize("rtf", [1e-12, 5e-324, 1e-9])
 def test_a_real_time_factor_that_stretches_a_tick_over_hours_is_refused_live_and_at_start(rtf):
     core = core_of()
@@ -172,7 +186,9 @@ def test_a_tick_of_minutes_stops_on_one_sigterm():
     env = os.environ | {"ROS_DOMAIN_ID": "201", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen(
         [sys.executable, "-c", "import sys\nfrom arm_sim_ros.physics import stability\n"
-         "stability.MAX_SUBSTEPS = 10 ** 9\nfrom arm_sim_ros.node.main import main\n"
+         "stability.MAX_SUBSTEPS = 10 ** 9\n"
+         "from arm_sim_ros.node import rebuild\n"   # it would refuse the plan: not the point
+         "rebuild.planned_substeps = lambda sim: 1\nfrom arm_sim_ros.node.main import main\n"
          "sys.exit(main(sys.argv[1:]))", "--transport", "dds", "--quiet", "--ros-args",
          "-p", "scene:=compliant_limit", "-p", "joint_limits.damping:=1e8",
          "-p", "initial_positions:=[0.1, 1.95]", "-p", "initial_velocities:=[0.0, 3.0]"],
@@ -354,3 +370,28 @@ def test_a_recording_draws_an_absurd_accepted_value_without_a_python_warning(tmp
     core.tick()
     core.finish()
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
+
+
+def test_physics_whose_plan_would_stall_the_node_is_refused_and_the_node_ticks_on():
+    """A tick of 1e5 sub-steps (~0.5 s) would leave the node behind its rate and its
+    services unanswered (seen on rclpy under a fuzz): refused, unless max_substeps allows it."""
+    core = core_of()
+    before = snapshot(core)
+    with pytest.raises(ParameterRefused, match="sub-steps per step to stay stable, more than "
+                                               "max_substeps = 1000"):
+        core.set_parameters({"damping": 1e5})
+    assert snapshot(core)[:4] == before[:4]
+    core.tick()
+    allowed = core_of(max_substeps=100000)
+    allowed.set_parameters({"damping": 1e5})   # asked for: the node takes it, and its cost
+    assert allowed.sim.substeps > 1000
+
+
+@pytest.mark.parametrize("start, needs", [
+    ({"springs.stiffness": [1e10, 1e10]}, "sub-steps per step to stay stable, more than max_substeps"),
+    ({"joint_limits.lower": [-0.5, -0.5], "joint_limits.upper": [0.5, 0.5],
+      "joint_limits.stiffness": 1e10}, "while a compliant limit is engaged"),
+])
+def test_a_node_whose_plan_would_stall_it_is_refused_at_start(start, needs):
+    with pytest.raises(ParameterRefused, match=needs):
+        node_core.ArmSimCore(resolve_parameters(start), LOG, FakeClock())

@@ -236,3 +236,19 @@ def test_a_rate_too_slow_for_the_velocity_gains_is_said_in_one_line(rate, said):
     joint_servo.setpoint[0:2] = [0.8, -0.2]
     sim.run(3.0)
     assert (abs(sim.state[0] - 0.8) > 1e-3) == said
+
+
+@pytest.mark.parametrize("books", ["refused plan", "dopri5"])
+def test_a_discrete_servo_without_a_global_estimate_samples_and_holds(books):
+    """Books with no shadow (a plan past the planner's bound holds the arm; dopri5 has no
+    global estimate): the servo still samples, where it once raised AttributeError out of
+    a node's tick (found by a live fuzz on rclpy)."""
+    scene = load_scene("servo_hold")
+    scene = scene.replace(servo=dict(scene.servo, rate=100.0),
+                          **({"damping": 1e200} if books == "refused plan"
+                             else {"integrator": "dopri5", "step_size": 0.01}))
+    sim = Simulator(scene)
+    for _ in range(5):
+        sim.step()
+    assert all(v == v for v in sim.state)
+    assert (sim.fault is not None) == (books == "refused plan")

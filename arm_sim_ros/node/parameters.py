@@ -144,7 +144,8 @@ PARAMETERS = (
     _scene_spec("tolerance", "float", "local error per simulated second a fixed step may "
                 "make before it splits into sub-steps (0 = estimate only)"),
     _scene_spec("max_substeps", "float", "the most sub-steps the tolerance may ask of one step; "
-                "past it the step is taken at the cap and the node says so once"),
+                "past it the step is taken at the cap and the node says so once; the node "
+                "refuses physics whose stability plan needs more"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),

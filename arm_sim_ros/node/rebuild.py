@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from math import isfinite
 
+from ..physics import stability
 from ..physics.effects import servo
 from ..physics.model import ParameterError
 from ..physics.scene import SceneError
@@ -16,9 +17,27 @@ def build_simulator(config: NodeConfig, changed) -> Simulator:
     """The simulator of `config`'s scene, or ParameterRefused naming the physics that cannot
     be built (an arm whose mass matrix overflows, a plan that leaves double precision)."""
     try:
-        return Simulator(config.scene)
+        sim = Simulator(config.scene)
     except (ValueError, ArithmeticError) as error:
         raise refusal(error, changed) from None
+    needed, cap = planned_substeps(sim), int(config.scene.max_substeps)
+    # a tick of 1e5 sub-steps would stall the node's rate and its services (past the
+    # planner's own bound every step is refused at once: held, as offline)
+    if cap < needed <= stability.MAX_SUBSTEPS:
+        reason = (f"the physics with these values needs {needed} sub-steps per step to stay "
+                  f"stable{' while a compliant limit is engaged' if needed > sim.substeps else ''}"
+                  f", more than max_substeps = {cap}: the node would fall behind its rate and "
+                  "stop answering; lower step_size, soften the effect, or raise max_substeps")
+        raise ParameterRefused(blamed(reason, list(changed)), reason)
+    return sim
+
+
+def planned_substeps(sim: Simulator) -> int:
+    """The sub-steps the stability plan asks of one step, engaged in a compliant limit
+    the most of that and the contact's count."""
+    stepper = sim.switching
+    engaged = stepper.contact_floor(sim.step_size) if stepper and stepper.engaged_rate else 0
+    return max(sim.substeps, engaged)
 
 
 def change_live(sim: Simulator, config: NodeConfig, names: list) -> None:

@@ -110,7 +110,8 @@ class Accuracy:
 
     def carry(self, previous, steps: int) -> None:
         """Go on from the books `previous` after `steps` steps (their shadow), checked now."""
-        self.shadow.carry(previous.shadow)
+        if hasattr(previous, "shadow"):  # none after a refused plan, or dopri5's: afresh
+            self.shadow.carry(previous.shadow)
         self.booked_taken = previous.taken(steps) or 0
         self.since = self.due = steps
 

@@ -297,11 +297,15 @@ def sample(sim, y) -> tuple:
     its integrals stepped (a state the switching stepper still follows: only integrals
     changed, which no mode and no right-hand side of a discrete servo reads). The error
     books' shadow samples its own state."""
-    joint_servo, shadow = sim.sampled, sim.accuracy.shadow
+    # no shadow: books without a global estimate (a plan the planner refuses, dopri5)
+    joint_servo, shadow = sim.sampled, getattr(sim.accuracy, "shadow", None)
     sampled = joint_servo.sample(y, joint_servo.held)
     if sim.switching is not None and sim.switching.last is y:
         sim.switching.last = sampled
-    z = shadow.start(y)
+    z = None if shadow is None else shadow.start(y)
+    if shadow is None:
+        joint_servo.shadow_held[:] = joint_servo.held
+        return sampled
     if z is None:                  # not followed (yet): the shadow is the motion
         joint_servo.shadow_held[:] = joint_servo.held
     else:
