@@ -212,6 +212,9 @@ class Kernel:
 
     path = "compiled (numba)"
 
+    def __deepcopy__(self, memo):   # machinery and scratch: nothing a step leaves behind
+        return self
+
     def __init__(self, dynamics, step, plain: bool):
         import numpy as np
         self.plain = plain        # runs of plain steps (no switches, no driver check)
@@ -294,6 +297,8 @@ class Steps:
     """step(f, y, h) compiled for each right-hand side f it is given: the scene's, and each
     mode's of a switching scene (events.py steps them; dynamics.mode_functions gives their
     source), compiled when first met, the command read at each call."""
+
+    __deepcopy__ = Kernel.__deepcopy__   # compiled steps and scratch: shared by copies
 
     path = "compiled (numba)"
 
