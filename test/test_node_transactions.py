@@ -395,3 +395,21 @@ def test_physics_whose_plan_would_stall_the_node_is_refused_and_the_node_ticks_o
 def test_a_node_whose_plan_would_stall_it_is_refused_at_start(start, needs):
     with pytest.raises(ParameterRefused, match=needs):
         node_core.ArmSimCore(resolve_parameters(start), LOG, FakeClock())
+
+
+@pytest.mark.parametrize("address", ["nonsense", "http://127.0.0.1:9876", ":9876",
+                                     "127.0.0.1:99999", "1e200", "rerun+http://host/proxy"])
+def test_a_viewer_address_rerun_cannot_take_is_refused_live_and_at_start(address):
+    """Any text was once taken as a host name to look up (a tick blocked for 5 s)."""
+    with pytest.raises(ParameterRefused, match="rerun_connect must be a viewer's address"):
+        resolve_parameters({"rerun_connect": address})
+    core = core_of()
+    with pytest.raises(ParameterRefused, match="a port .9876., host:port"):
+        core.set_parameters({"rerun_connect": address})
+    assert core.config.values["rerun_connect"] == ""
+
+
+@pytest.mark.parametrize("address", ["9876", "127.0.0.1:9876", "viewer.lan:9876", "[::1]:9876",
+                                     "rerun+http://127.0.0.1:9876/proxy"])
+def test_the_viewer_addresses_rerun_takes_are_accepted(address):
+    assert resolve_parameters({"rerun_connect": address}).values["rerun_connect"] == address

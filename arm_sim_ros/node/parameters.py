@@ -5,7 +5,6 @@ cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 from ..interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
@@ -13,13 +12,16 @@ from ..physics.effects import MAPPING_EFFECTS, EffortLimits
 from ..physics.effects.base import REQUIRED
 from ..physics import urdf
 from ..physics.model import BRIEF, ParameterError, brief
-from ..outputs import check_output
-from ..usage import UsageError, one_line
+from .recording_targets import rerun_path_problem, viewer_address_problem
+from ..usage import one_line
 from ..physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
 MAX_WALL_PERIOD = 3600.0          # wall s between ticks: slower is no longer a running node
+
+
+RECORDING = {"rerun_path": rerun_path_problem, "rerun_connect": viewer_address_problem}
 
 
 class ParameterRefused(ValueError):
@@ -261,8 +263,7 @@ class NodeConfig:
                                        f"with -p {name}:=VALUE")
         config = _build(self.values | changes, load=lambda name: self.scene,
                         changed=list(changes))
-        if config.values["rerun_path"] != self.values["rerun_path"]:
-            check_rerun_path(config.values["rerun_path"])
+        check_recording(config.values, [n for n in RECORDING if config.values[n] != self.values[n]])
         return config
 
 
@@ -273,24 +274,15 @@ def resolve_parameters(overrides: dict) -> NodeConfig:
     values, scene = _defaults(*(coerce(SPECS[name], overrides.get(name, SPECS[name].default))
                                 for name in READ_ONLY))
     config = _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
-    check_rerun_path(config.values["rerun_path"])
+    check_recording(config.values)
     return config
 
 
-def check_rerun_path(path: str) -> None:
-    """A recording the node may start: a new .rrd in a writable directory, checked as
-    `arm-sim run --rerun` checks it (outputs.check_output); the node never replaces a file."""
-    if not path:
-        return
-    if "\x00" in path:
-        raise ParameterRefused("rerun_path", "a file name cannot hold a NUL character")
-    if os.path.lexists(path) and not os.path.isdir(path):
-        raise ParameterRefused("rerun_path", f"{path} exists already; choose a new name "
-                               "(a recording is never replaced)")
-    try:
-        check_output(path, "rerun_path", force=True, suffixes=(".rrd",))
-    except UsageError as error:
-        raise ParameterRefused("rerun_path", str(error)) from None
+def check_recording(values: dict, names=RECORDING) -> None:
+    """The recording targets `names` of `values`, checked before the node opens them."""
+    for name in names:
+        if (problem := RECORDING[name](values[name])) is not None:
+            raise ParameterRefused(name, problem)
 
 
 def _check_known(names) -> None:
