@@ -66,20 +66,17 @@ class Lines:
 
 
 def writer_for(participant, topic, keep_all=True):
-    """keep_all: every sample kept until acknowledged, a write waiting for room as long as a
-    busy machine needs (the default 100 ms timed a write out in CI while the recorder's
-    process was starved: test_bag.writer_for's fault, again)."""
-    from cyclonedds.pub import DataWriter
-    from cyclonedds.qos import Policy, Qos
-    from cyclonedds.topic import Topic
-    from cyclonedds.util import duration
-
-    qos = wire.default_qos(wire.JointState)
+    """keep_all: test_bag's writer (every sample kept until acknowledged, a write waiting for
+    room as long as a busy machine needs: the default 100 ms once timed out in CI); else the
+    node's keep-last QoS."""
+    sys.path.insert(0, os.path.dirname(__file__))
+    from test_bag import writer_for as keeping_writer
     if keep_all:
-        qos += Qos(Policy.History.KeepAll,
-                   Policy.Reliability.Reliable(max_blocking_time=duration(seconds=60)))
+        return keeping_writer(participant, topic, wire.JointState)
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.topic import Topic
     return DataWriter(participant, Topic(participant, wire.ros_topic(topic), wire.JointState),
-                      qos=qos)
+                      qos=wire.default_qos(wire.JointState))
 
 
 def wait_matched(writer, timeout=20.0):

@@ -28,7 +28,8 @@ def build_simulator(config: NodeConfig, changed) -> Simulator:
                   f"stable{' while a compliant limit is engaged' if needed > sim.substeps else ''}"
                   f", more than max_substeps = {cap}: the node would fall behind its rate and "
                   "stop answering; lower step_size, soften the effect, or raise max_substeps")
-        raise ParameterRefused(blamed(reason, list(changed)), reason)
+        # the value just set, not the step_size and max_substeps the advice names
+        raise ParameterRefused(blamed("", list(changed)), reason)
     return sim
 
 

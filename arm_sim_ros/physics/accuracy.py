@@ -110,8 +110,7 @@ class Accuracy:
 
     def carry(self, previous, steps: int) -> None:
         """Go on from the books `previous` after `steps` steps (their shadow), checked now."""
-        if hasattr(previous, "shadow"):  # none after a refused plan, or dopri5's: afresh
-            self.shadow.carry(previous.shadow)
+        self.shadow.carry(previous.shadow)
         self.booked_taken = previous.taken(steps) or 0
         self.since = self.due = steps
 
@@ -352,6 +351,7 @@ class Unchecked:
 
     error_estimate = float("nan")
     due = 0
+    shadow = None             # no global estimate: books after these start afresh
 
     def __init__(self, advance, substeps: int, stepper=None):
         self.check = self.plain = advance

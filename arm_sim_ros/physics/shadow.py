@@ -43,6 +43,9 @@ class Shadow:
         self.sampled = None          # a discrete servo: the shadow steps under its own samples
 
     def carry(self, previous) -> None:
+        """Go on from the shadow `previous` (None: books without one; start afresh)."""
+        if previous is None:
+            return
         self.largest, self.local = previous.largest, None
         if previous.offset is not None:
             self.offset = list(previous.offset[:4]) + [0.0] * (self.states - 4)

@@ -297,20 +297,17 @@ def sample(sim, y) -> tuple:
     its integrals stepped (a state the switching stepper still follows: only integrals
     changed, which no mode and no right-hand side of a discrete servo reads). The error
     books' shadow samples its own state."""
-    # no shadow: books without a global estimate (a plan the planner refuses, dopri5)
-    joint_servo, shadow = sim.sampled, getattr(sim.accuracy, "shadow", None)
+    joint_servo, shadow = sim.sampled, sim.accuracy.shadow   # None: no global estimate
     sampled = joint_servo.sample(y, joint_servo.held)
     if sim.switching is not None and sim.switching.last is y:
         sim.switching.last = sampled
     z = None if shadow is None else shadow.start(y)
-    if shadow is None:
-        joint_servo.shadow_held[:] = joint_servo.held
-        return sampled
-    if z is None:                  # not followed (yet): the shadow is the motion
+    if z is None:                  # not followed (yet), or none: the shadow is the motion
         joint_servo.shadow_held[:] = joint_servo.held
     else:
         shadow.shadow, shadow.last = joint_servo.sample(z, joint_servo.shadow_held), sampled
-    shadow.sampled = joint_servo
+    if shadow is not None:
+        shadow.sampled = joint_servo
     return sampled
 
 
