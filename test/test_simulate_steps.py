@@ -215,10 +215,46 @@ def test_the_harness_client_runs_the_action():
     before = node.core.sim.steps
     assert harness.simulate(20) == (a.STATUS_SUCCEEDED, s.RESULT_OK, "")
     assert node.core.sim.steps == before + 20 * node.core.config.steps_per_tick
+    assert harness.received_feedback() == [(k, 20 - k) for k in range(1, 21)]
     assert len(harness.received_joint_states()) >= 20
     assert harness.play() == s.RESULT_OK
     status, code, message = harness.simulate(5)
     assert (status, code) == (a.STATUS_ABORTED, s.RESULT_OPERATION_FAILED) and "paused" in message
+
+
+class Clock:
+    def __init__(self):
+        self.ns = 0
+
+    def __call__(self):
+        return self.ns
+
+
+class Control:
+    """A paused SimulationControl that counts its ticks."""
+    state, ticks = s.STATE_PAUSED, 0
+
+    def step(self, n):
+        self.ticks += n
+        return s.RESULT_OK, ""
+
+
+def test_a_goals_first_tick_waits_a_moment_for_a_reader_of_its_feedback():
+    """A client that has just found the server may not be matched with its feedback yet
+    (ros2 action send_goal --feedback showed 2 to 4 of 20): the goal waits for a reader, up
+    to FEEDBACK_WAIT, then runs whether or not one came."""
+    clock, control = Clock(), Control()
+    goals = a.StepsGoals(control, clock)
+    goals.send_goal(bytes(range(16)), 3)
+    assert goals.advance(listening=False) is None and control.ticks == 0
+    clock.ns += int(0.9 * a.FEEDBACK_WAIT * 1e9)
+    assert goals.advance(listening=False) is None and control.ticks == 0
+    assert goals.advance(listening=True).completed == 1             # a reader came
+    assert goals.advance(listening=False).completed == 2            # the first tick only
+    unheard = a.StepsGoals(control, clock)
+    unheard.send_goal(bytes(range(1, 17)), 1)
+    clock.ns += int(a.FEEDBACK_WAIT * 1e9)
+    assert unheard.advance(listening=False).status == a.STATUS_SUCCEEDED   # nobody: runs
 
 
 def test_a_closed_node_leaves_with_its_action_topics():

@@ -16,6 +16,7 @@ from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from arm_sim_ros.node import messages as msg
+from arm_sim_ros.node import simulate_steps as a
 from arm_sim_ros.node import simulation as s
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.parameters import resolve_parameters
@@ -211,7 +212,10 @@ class FakeNode:
     """What rclpy_simulation.serve uses of an rclpy node: create_service and the logger."""
 
     def __init__(self):
-        self.services, self.lines = {}, []
+        self.services, self.lines, self.readers = {}, [], {"simulate_steps/_action/feedback": 1}
+
+    def count_subscribers(self, topic):
+        return self.readers.get(topic, 0)
 
     def create_service(self, kind, name, handler):
         self.services[name] = (kind, handler)
@@ -329,3 +333,28 @@ def test_on_rclpy_the_action_follows_the_same_rules(monkeypatch):
     result = run_goal(execute, stopped, cancel_after=2)
     assert stopped.ended == "canceled" and result.error_message == "canceled after 2 of 100 steps"
     assert len(published) == 6
+
+
+def test_on_rclpy_a_goals_first_tick_waits_a_moment_for_a_reader_of_its_feedback(monkeypatch):
+    node, published, control = served_by_fakes(monkeypatch)
+    execute = rclpy_simulation.serve(node, control)[-1].execute_callback
+    control.set_state(s.STATE_PAUSED)
+    node.readers.clear()
+    handle, turns = FakeGoalHandle(2), 0
+    coroutine = execute(handle)
+    for turns in range(1, 10_000_000):
+        coroutine.send(None)
+        if turns == 1000:       # no reader yet: no tick
+            assert not published and not handle.feedback
+            node.readers["simulate_steps/_action/feedback"] = 1
+        if published:
+            break
+    assert 1000 < turns < 1010 and handle.feedback == [(1, 1)]
+    with pytest.raises(StopIteration):
+        while True:
+            coroutine.send(None)
+    nobody = FakeGoalHandle(1)
+    node.readers.clear()
+    started = time.monotonic()
+    assert run_goal(execute, nobody).result == s.RESULT_OK and nobody.feedback == [(1, 0)]
+    assert time.monotonic() - started >= a.FEEDBACK_WAIT

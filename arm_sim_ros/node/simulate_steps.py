@@ -8,7 +8,9 @@ simulation playing, another goal running, more steps than one call may take) is 
 once with RESULT_OPERATION_FAILED and why. An executing goal ticks exactly `steps` times
 (each tick published, as StepSimulation's), with feedback after each; a cancel stops it
 between two ticks (CANCELED, its result saying how many it took); a play request meanwhile
-aborts it at the next tick.
+aborts it at the next tick. A goal's first tick waits, up to FEEDBACK_WAIT, for a reader of
+the feedback: a client that has just found the server (`ros2 action send_goal --feedback`)
+may not yet be matched with it, and would miss the first ticks' feedback.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ TERMINAL = (STATUS_SUCCEEDED, STATUS_CANCELED, STATUS_ABORTED)
 ERROR_NONE, ERROR_REJECTED, ERROR_UNKNOWN_GOAL_ID, ERROR_GOAL_TERMINATED = 0, 1, 2, 3
 KEPT = 64            # finished goals whose results are kept (the oldest go first)
 NO_GOAL = bytes(16)  # a zero goal id: every goal (CancelGoal)
+FEEDBACK_WAIT = 0.5  # s (wall): the longest a goal's first tick waits for a feedback reader
 
 
 @dataclass
@@ -49,6 +52,11 @@ def refusal(control, steps: int, busy: bool) -> tuple | None:
     if steps > MAX_STEPS:
         return RESULT_OPERATION_FAILED, f"{steps} steps is beyond {MAX_STEPS} in one goal"
     return None
+
+
+def waiting(stamp_ns: int, now_ns: int, done: int, listening: bool) -> bool:
+    """The goal accepted at `stamp_ns` holds its first tick: nobody reads its feedback yet."""
+    return not done and not listening and now_ns - stamp_ns < FEEDBACK_WAIT * 1e9
 
 
 def canceled(done: int, steps: int) -> str:
@@ -87,10 +95,14 @@ class StepsGoals:
         return next((g for g in self.goals.values()
                      if g.status in (STATUS_EXECUTING, STATUS_CANCELING)), None)
 
-    def advance(self) -> Goal | None:
-        """One tick of the executing goal; the goal if it ticked (its feedback is due)."""
+    def advance(self, listening: bool = True) -> Goal | None:
+        """One tick of the executing goal; the goal if it ticked (its feedback is due).
+        `listening`: the feedback has a reader."""
         goal = self.active()
         if goal is None:
+            return None
+        if goal.status == STATUS_EXECUTING and waiting(goal.stamp_ns, self.clock_ns(),
+                                                       goal.completed, listening):
             return None
         if goal.status == STATUS_CANCELING:
             self._finish(goal, STATUS_CANCELED, RESULT_OK, canceled(goal.completed, goal.steps))

@@ -9,6 +9,7 @@ import time
 import uuid
 
 from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
@@ -42,11 +43,17 @@ class SimulationClient:
         self.joint_states = DataReader(p, Topic(p, msg.ros_topic(f"{namespace}/joint_states"),
                                                 msg.JointState),
                                        qos=msg.default_qos(msg.JointState, depth=1000))
+        # as an rcl_action client: the action's feedback read (a goal waits a moment for it)
+        self.feedback = DataReader(p, Topic(p, msg.ros_topic(f"{namespace}/{a.PREFIX}feedback"),
+                                            a.FeedbackMessage),
+                                   qos=a.topic_qos(a.FeedbackMessage, Policy.Durability.Volatile,
+                                                   1000))
 
     def wait_for_node(self) -> None:
         self._until(lambda: all(service.matched() for service in self.services.values())
                     and all(msg.matched(w) for w in self.commands.values())
-                    and msg.matched(self.joint_states), "the node's services and topics")
+                    and msg.matched(self.joint_states) and msg.matched(self.feedback),
+                    "the node's services and topics")
 
     def call(self, service: str, **fields):
         """The reply to one request (the service's response type)."""
@@ -89,6 +96,12 @@ class SimulationClient:
         writer = self.commands[field]
         writer.write(msg.Float64MultiArray(data=[float(v) for v in values]))
         writer.wait_for_acks(duration(seconds=TIMEOUT))
+
+    def received_feedback(self) -> list:
+        """(completed, remaining) steps of every SimulateSteps feedback since the last call."""
+        self.serve()
+        return [(m.feedback.completed_steps, m.feedback.remaining_steps)
+                for m in self.feedback.take(N=100_000) if isinstance(m, a.FeedbackMessage)]
 
     def received_joint_states(self) -> list:
         """Every JointState the node published since the last call."""

@@ -231,7 +231,7 @@ class DdsSimulateSteps:
         the results waited for, of goals that finished."""
         if self.goals is None:
             return
-        goal = self.goals.advance()
+        goal = self.goals.advance(listening=bool(msg.matched(self.feedback_writer)))
         if goal is not None:
             self.feedback_writer.write(FeedbackMessage(UUID(list(goal.goal_id)), Feedback(
                 goal.completed, goal.remaining)))

@@ -5,7 +5,9 @@ and names as on dds (dds_simulation.py, dds_action.py), over the same Simulation
 ActionServer keeps the goals."""
 from __future__ import annotations
 
-from ..simulate_steps import canceled, interrupted, refusal
+import time
+
+from ..simulate_steps import canceled, interrupted, refusal, waiting
 from ..simulation import RESULT_OK
 
 
@@ -49,7 +51,8 @@ def serve(node, control) -> list:
         node.create_service(srv.ResetSimulation, "reset_simulation",
                             answer(lambda request: control.reset(request.scope))),
         ActionServer(node, SimulateSteps, "simulate_steps",
-                     execute_callback=executor(control, SimulateSteps, Result),
+                     execute_callback=executor(control, SimulateSteps, Result, lambda: (
+                         node.count_subscribers("simulate_steps/_action/feedback") > 0)),
                      cancel_callback=lambda goal_handle: CancelResponse.ACCEPT),
     ]
 
@@ -62,9 +65,10 @@ class Turn:
         yield
 
 
-def executor(control, action, result_type):
+def executor(control, action, result_type, listening):
     """SimulateSteps' execute callback: a tick, its feedback, a turn of the executor; a goal
-    that cannot run (simulate_steps.refusal) is aborted saying why."""
+    that cannot run (simulate_steps.refusal) is aborted saying why. `listening()`: the
+    feedback has a reader (the first tick waits a moment for one)."""
     running = []
 
     async def execute(goal_handle):
@@ -73,6 +77,10 @@ def executor(control, action, result_type):
         if code == RESULT_OK:
             running.append(goal_handle)
             try:
+                accepted = time.monotonic_ns()
+                while waiting(accepted, time.monotonic_ns(), done, listening()) and \
+                        not goal_handle.is_cancel_requested:
+                    await Turn()
                 while done < steps and not goal_handle.is_cancel_requested:
                     code, why = control.step(1)
                     if code != RESULT_OK:           # set playing meanwhile
