@@ -63,6 +63,14 @@ def test_the_fragments_joints_are_the_urdfs_with_every_command_interface_and_its
             ["position", "velocity", "effort"]
 
 
+def test_controller_manager_clamps_commands_to_the_fragments_limits():
+    """Jazzy's controller_manager takes a command interface's min/max as the joint's limit
+    (the URDF's continuous joints declare none) but enforces limits only when asked: an
+    effort above torque_limit then reaches the node, which refuses it."""
+    manager = yaml.safe_load((ROOT / "config" / "ros2_controllers.yaml").read_text())
+    assert manager["controller_manager"]["ros__parameters"]["enforce_command_limits"] is True
+
+
 CONTROLLERS = yaml.safe_load((ROOT / "config" / "ros2_controllers.yaml").read_text())
 
 
