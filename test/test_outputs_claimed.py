@@ -1,6 +1,8 @@
 """Every file `arm-sim run` writes is claimed exclusively before the run (as --bag's
 directory is by its mkdir): of two runs naming the same --csv or --rerun, the second is
 refused in one line and the first's file is left whole."""
+import struct
+
 import pytest
 
 from arm_sim_ros import outputs
@@ -64,6 +66,38 @@ def test_a_full_disk_under_rerun_ends_in_an_error_a_nonzero_exit_and_a_readable_
     assert "Traceback" not in run.stderr
     entities = {chunk.entity_path for chunk in RrdReader(str(path)).stream()}
     assert "/energy/balance_residual" in entities   # what fit reads back
+
+
+def test_a_nodes_recording_keeps_no_manifest_in_memory_and_is_still_checked(tmp_path):
+    """rerun keeps ~1 kB per chunk for the footer's manifest until the file closes: a node
+    (hours of recording) writes none. Its file then has no end marker: whole messages are
+    complete, and a file cut mid-message is cut back and said, as with a footer."""
+    from arm_sim_ros.physics.scene import load_scene
+    from arm_sim_ros.physics.simulator import Simulator
+    from arm_sim_ros.recording import sinks
+    from arm_sim_ros.recording.telemetry import make_recorder
+    from test_telemetry import read_back
+
+    sim, path = Simulator(load_scene("release")), tmp_path / "node.rrd"
+    recorder = make_recorder(path=str(path))
+    recorder.for_node(0)
+    recorder.start(sim)
+    for _ in range(50):
+        sim.step()
+        recorder.step(sim)
+    recorder.finish(sim)
+    data = path.read_bytes()
+    kinds, position = [], sinks.RRD_HEADER
+    while position < len(data):
+        kind, length = struct.unpack_from("<QQ", data, position)
+        kinds.append(kind)
+        position += 16 + length
+    assert position == len(data) and sinks.RRD_END not in kinds      # no footer, whole
+    assert len(read_back(path)["joints/angle"]["Scalars:scalars"]) == 51
+    path.write_bytes(data[:-5])                                       # cut mid-message
+    with pytest.raises(UsageError, match="cut back"):
+        sinks.check_rrd_file(path, footer=False)
+    assert path.stat().st_size == len(data) - 16 - length and read_back(path)
 
 
 def test_text_lines_sent_without_rows_are_each_recorded(tmp_path):

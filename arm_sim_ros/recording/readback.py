@@ -10,6 +10,7 @@ and `unit` values).
 """
 from __future__ import annotations
 
+import warnings
 from collections import defaultdict
 
 import pyarrow as pa
@@ -28,7 +29,9 @@ class RecordingError(ValueError):
 
 def _reader(path):
     try:
-        reader = rr.chunk.RrdReader(str(path))
+        with warnings.catch_warnings():    # a node's file has no footer (sinks.py): streamed
+            warnings.filterwarnings("ignore", "RRD file has no footer")
+            reader = rr.chunk.RrdReader(str(path))
         recordings = reader.recordings()
     except Exception as error:  # rerun raises its own kinds for a missing or bad file
         raise RecordingError(f"{path}: not a readable Rerun recording ({error})") from None

@@ -18,6 +18,9 @@ from ..usage import UsageError
 from .csv_file import let_writes_fail_on_file_size_limit
 
 DEFAULT_PORT = 9876
+# A node's file is written without rerun's footer: the footer's manifest keeps ~1 kB per
+# chunk in memory until the file closes (a node records for hours; rerun's own advice for
+# long streams). rerun's warning of it is silenced in __init__.py.
 RRD_HEADER = 12       # an .rrd: 'RRF2', version, options; then messages {kind, length}
 RRD_END = 0           # the kind of the end-of-stream marker (the footer follows)
 
@@ -44,16 +47,17 @@ def viewer_reachable(url: str, timeout: float = 0.5) -> bool:
 
 
 def open_sinks(stream, board, opened: list, warn_once, path=None, spawn=False,
-               connect=None) -> bool:
+               connect=None, footer=True) -> bool:
     """Open the sinks asked for on `stream` with `board` as the default blueprint; True when
     any opened. A description of each sink that opens is appended to `opened`; each failure
-    is warn_once(key, message), key "file", "spawn" or "connect", and that sink is skipped."""
+    is warn_once(key, message), key "file", "spawn" or "connect", and that sink is skipped.
+    `footer`: the file ends in rerun's footer (see above)."""
     sinks = []
     if path:
         let_writes_fail_on_file_size_limit()   # a full file then fails a write: checked at the end
         try:
             open(path, "wb").close()
-            sinks.append(rr.FileSink(str(path)))
+            sinks.append(rr.FileSink(str(path), write_footer=footer))
             opened.append(f"file {path}")
         except OSError as error:
             warn_once("file", f"rerun: cannot write {path} ({error.strerror}); "
@@ -122,11 +126,11 @@ def _spawn_viewer(stream, sinks, opened, warn_once) -> None:
     opened.append("spawned viewer")
 
 
-def check_rrd_file(path) -> None:
-    """After the stream is disconnected: `path` must end in rerun's end marker. rerun only
-    logs a write the disk refuses, so a full disk would leave a file cut mid-message that no
-    reader opens; it is cut back to its last whole message (a readable recording, without
-    the footer) and UsageError says so."""
+def check_rrd_file(path, footer=True) -> None:
+    """After the stream is disconnected: `path` must end in rerun's end marker (without a
+    `footer`, in a whole message). rerun only logs a write the disk refuses, so a full disk
+    would leave a file cut mid-message that no reader opens; it is cut back to its last
+    whole message (a readable recording, without the footer) and UsageError says so."""
     try:
         if not stat.S_ISREG(os.stat(path).st_mode):
             return                               # a device or pipe: nothing to check
@@ -142,6 +146,8 @@ def check_rrd_file(path) -> None:
         if kind == RRD_END:
             return                               # complete
         position, messages = position + 16 + length, messages + 1
+    if not footer and messages and position == len(data):
+        return                                   # complete: no end marker without a footer
     with open(path, "r+b") as file:
         file.truncate(position if messages else 0)
     raise UsageError(f"cannot write --rerun {path}: the disk refused part of it (full, or a "

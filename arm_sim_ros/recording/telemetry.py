@@ -193,7 +193,7 @@ class RerunRecorder:
             self._guard(self.stream.disconnect)
         self.enabled = False
         if self.path and self.sinks:
-            check_rrd_file(self.path)         # a full disk: cut to whole messages, one line
+            check_rrd_file(self.path, footer=not self.node)   # a full disk: whole messages
 
     # -- binding a simulator --------------------------------------------------------------
 
@@ -228,7 +228,8 @@ class RerunRecorder:
         if self._layout is None:
             self._layout = self._static.drawn(snap)   # the default blueprint: drawn here
             if open_sinks(self.stream, blueprint(snap, self.live, self.node), self.sinks,
-                          self._warn_once, path=self.path, spawn=self.spawn, connect=self.connect):
+                          self._warn_once, path=self.path, spawn=self.spawn, connect=self.connect,
+                          footer=not self.node):
                 self.stream.send_recording_name(f"arm_sim {(self.scene or sim.scene).name}")
                 self.enabled = True
         self._static.due = (snap, sim)
