@@ -27,9 +27,6 @@ FUZZ = settings(max_examples=EXAMPLES, deadline=None,
 PASSED = 1e-9          # rad: the most a hard limit may be passed
 BOOKS = 1e-4           # the balance residual, as a fraction of the energy in play: what
                        # the default tolerance leaves (1e-5 after 0.2 s of a fast arm)
-STOPS_BOOKS = 1e-3     # ...and where kilo-newton-metre Coulomb friction stops a joint inside
-                       # a 50 ms step: 1.2e-4 to 3e-4 seen, which the tolerance does not
-                       # reduce (docs/reliability.md, "Events cannot be missed": left open)
 
 
 def run_checked(scene, seconds):
@@ -154,7 +151,7 @@ def test_every_stop_large_coulomb_friction_makes_is_located_as_the_reference_has
     sim.run(0.2)
     assert sum(sim.switch_events.values()) == len(reference.switch_times)
     assert max(abs(a - b) for a, b in zip(sim.state[:2], expected[:2])) < 1e-4
-    assert sim.fault is None and books_off(sim) < STOPS_BOOKS
+    assert sim.fault is None and books_off(sim) < BOOKS
 
 
 @st.composite

@@ -25,8 +25,9 @@ on h; angles unscaled: unwrapped, their size says nothing), never under ROUNDING
 sub-step count follows the error both ways (a PI controller); a step that misses is taken
 again; the stability plan's count is the floor and `max_substeps` the ceiling, said once
 when it cannot meet the tolerance, as is a tolerance that splitting does not reach. On
-switching scenes compliant contact and free flight are controlled apart, and a count the
-controller asks for at a switch applies from the next step. 0 turns the controller off
+switching scenes compliant contact, free flight and the pieces up to a located switch
+(whose length the switch sets) are controlled apart, and a count the controller asks for
+at a switch applies from the next step. 0 turns the controller off
 (estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s spin drifts 3.6e-7
 of its energy over 5 s at h = 10 ms, 1.5e-6 at 1 ms.
 """
@@ -184,6 +185,7 @@ class Accuracy:
         switches, counts and messages as the last attempt has them), so the error made at
         a switch is controlled like any other."""
         stepper = self.stepper
+        stepper.located_substeps = 1      # raised below where a located piece misses
         kept, emit, heard = keep(stepper), stepper.emit, []
         stepper.emit = lambda kind, message: heard.append((kind, message))
         try:
@@ -204,8 +206,7 @@ class Accuracy:
             # latest smooth estimate, and are checked again soon
             self.shadow.local = predicted or [0.0] * self.states
             predicted = None
-        error = sums[False][0] + sums[True][0]
-        scaled = sums[False][1] + sums[True][1]
+        error, scaled = (sum(part[k] for part in sums.values()) for k in (0, 1))
         wanted = n = stepper.substeps
         if self.tolerance:
             if sums[False][2]:
@@ -248,14 +249,15 @@ class Accuracy:
 
 
 def attempt(books, f, y, h):
-    """(the step, {engaged: [error, scaled, pieces]}, signed error) with every piece
-    doubled."""
-    sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0]}
+    """(the step, {part: [error, scaled, pieces]}, signed error) with every piece doubled;
+    the parts: free flight (False), compliant contact (True), pieces up to a located switch
+    (None: their length is the switch's, so only their own count can shorten them)."""
+    sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0], None: [0.0, 0.0, 0]}
     stepper, signed = books.stepper, [0.0] * books.states
 
-    def piece(rhs, y0, dt, full):
-        error, scaled, vector = books.doubled(rhs, y0, dt, full)
-        part = sums[bool(stepper.mode[2] or stepper.mode[3])]
+    def piece(rhs, y0, dt, full, located=0):
+        error, scaled, vector = books.doubled(rhs, y0, dt, full, located or 1)
+        part = sums[None if located else bool(stepper.mode[2] or stepper.mode[3])]
         part[0] += error
         part[1] += scaled
         part[2] += 1
@@ -264,20 +266,23 @@ def attempt(books, f, y, h):
     return stepper.advance(f, y, h, piece), sums, signed
 
 def more(books, sums, h) -> bool:
-    """Raise the counts of the parts (free flight, contact) that missed the tolerance;
-    False when none did, or none can be raised (the cap, or no gain: said once)."""
+    """Raise the counts of the parts (free flight, contact, located pieces) that missed the
+    tolerance; False when none did, or none can be raised (the cap, or no gain: said once)."""
     stepper, raised = books.stepper, False
-    for engaged, (_, scaled, pieces) in sums.items():
+    for part, (_, scaled, pieces) in sums.items():
         if not pieces or scaled <= books.target(h):
             continue
-        now = stepper.substeps_for(h, True) if engaged else stepper.substeps
-        first = books.tried.setdefault(engaged, (now, scaled))
+        now = stepper.located_substeps if part is None else stepper.substeps_for(h, True) \
+            if part else stepper.substeps
+        first = books.tried.setdefault(part, (now, scaled))
         if now >= GIVE_UP * first[0] and scaled > NO_GAIN * first[1]:
             said_unreachable(books, scaled, now, h)      # more sub-steps bought nothing
             continue
         wanted = retake(now, books.ratio(scaled, h), books.order, books.cap)
         if wanted > now:
-            if engaged:
+            if part is None:
+                stepper.located_substeps = wanted
+            elif part:
                 stepper.contact_substeps = wanted
             else:
                 stepper.substeps = books.free.n = wanted

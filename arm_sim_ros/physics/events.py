@@ -82,6 +82,7 @@ class Switching:
                           if "impact_loss" in dynamics.channels else None)
         self.substeps, self.engaged_rate = substeps, 0.0
         self.contact_substeps = 0         # the tolerance's count while engaged (accuracy.py)
+        self.located_substeps = 1         # ...and of a re-step up to a located switch
         if self.limits is not None and not self.hard:
             # h |λ| of the engaged arm per unit step (the step size is the plan's business)
             ratio, _, _ = stability.bound(tableau, list(dynamics.active)
@@ -244,8 +245,12 @@ def locate(stepper, rhs, guard, kinds, y0, dt, elapsed, piece=None):
     """(t, state after the switch): the earliest root of min g in [0, dt] by Illinois
     regula falsi on re-steps of length t from y0, to TIME_TOLERANCE; `piece` is told
     the smooth re-step up to the switch."""
+    m = stepper.located_substeps     # the tolerance's count for such a piece
+
     def g(t):
-        y = stepper.step(rhs, y0, t) if t > 0.0 else y0
+        y = y0
+        for _ in range(m if t > 0.0 else 0):
+            y = stepper.step(rhs, y, t / m)
         return min(guard(*y[:stepper.width])), y
 
     (ga, ya), (gb, yb) = g(0.0), g(dt)
@@ -269,7 +274,7 @@ def locate(stepper, rhs, guard, kinds, y0, dt, elapsed, piece=None):
     impact = switches and switches[0][0] == "impact"   # arrive, not pass: the state before
     t, y = (a, ya) if impact else (b, yb)
     if piece is not None and t > 0.0:
-        piece(rhs, y0, t, y)
+        piece(rhs, y0, t, y, m)
     return t, stepper.apply(y, switches[:1] if impact else switches, at=elapsed + b)
 
 

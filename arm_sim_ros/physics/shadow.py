@@ -102,4 +102,5 @@ class Twin:
     def __call__(self, f, z, h):
         self.twin.substeps = self.stepper.substeps
         self.twin.contact_substeps = self.stepper.contact_substeps
+        self.twin.located_substeps = self.stepper.located_substeps
         return self.twin.advance(f, z, h)
