@@ -64,6 +64,29 @@ def convergence(seconds: float = 0.2) -> list[str]:
     return lines
 
 
+def books_by_channel(h: float = 1e-3, seconds: float = 0.2) -> list[str]:
+    """Each book's error against FirstPrinciples' own (integrated with the motion by DOP853),
+    and E's: which quadrature leaves the residual (tolerance 0)."""
+    from test_effects import BOOKS
+    lines = [f"books at t = {seconds:g} s, h = {h * 1e3:g} ms, tolerance 0: ours - reference (J)",
+             f"{'':7}{'method':<16}" + "".join(f"{b:>18}" for b in BOOKS) + f"{'E':>10}"
+             f"{'residual':>10}"]
+    for label, scene, command in CASES:
+        truth = FirstPrinciples(scene, command=command)
+        reference = truth.solve(seconds)
+        exact = dict(zip(BOOKS, reference[-len(BOOKS):]))
+        for method in METHODS:
+            sim = simulator(scene.replace(step_size=h, integrator=method), False)
+            sim.set_command(*command)
+            sim.run(seconds)
+            books = sim.channel_values(sim.state)
+            lines.append(f"{label:<7}{method:<16}"
+                         + "".join(f"{books[b] - exact[b]:>18.1e}" for b in BOOKS)
+                         + f"{sim.energy(sim.state) - truth.energy(reference):>10.1e}"
+                         + f"{sim.residual():>10.1e}")
+    return lines
+
+
 def under_tolerance(seconds: float, repeat: int) -> list[str]:
     """geared_arm as shipped (friction, limits, clamps, default tolerance), from rest, held
     and commanded: the plan, the sub-steps per step the run took, |q, qd - reference| (rk4
@@ -223,7 +246,7 @@ def main() -> None:
     parser.add_argument("--linear-parts", action="store_true",
                         help="the study of what else the exact part could hold (scipy)")
     args = parser.parse_args()
-    tables = [convergence(), under_tolerance(args.seconds, args.repeat)]
+    tables = [convergence(), books_by_channel(), under_tolerance(args.seconds, args.repeat)]
     if args.linear_parts:
         tables.append(linear_parts())
     if args.dcmotor:
