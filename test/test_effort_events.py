@@ -12,7 +12,7 @@ switch scipy's solve_ivp(events=...) locates; here it also records when.
 import numpy as np
 import pytest
 
-from arm_sim_ros.physics.integrators import RK4, compile_step
+from arm_sim_ros.physics.integrators import INTEGRATORS, step_for
 from arm_sim_ros.physics.scene import Scene, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.physics.stability import substepping
@@ -58,9 +58,10 @@ def timed(sim):
 
 def mode_free(sim, steps):
     """The state after `steps` steps of the mode-free right-hand side: MIN/MAX clamps in
-    every RK stage (the simulator before clamps were modes; Batch today)."""
-    advance = substepping(compile_step(RK4, len(sim.channels), extra=len(sim.extra)),
-                          sim.substeps)
+    every RK stage (the simulator before clamps were modes; Batch today), by the scene's
+    method (rk4, or exponential_rk4 for geared_arm's windings)."""
+    method = INTEGRATORS[sim.scene.integrator]
+    advance = substepping(step_for(method, len(sim.channels), sim.dynamics.decay), sim.substeps)
     y = sim.state
     for _ in range(steps):
         y = advance(sim.dynamics.function, y, sim.step_size)

@@ -19,8 +19,7 @@ from arm_sim_ros.physics.stability import exponential_radius
 sys.path.insert(0, str(Path(__file__).parent))
 from test_effects import FirstPrinciples  # noqa: E402
 
-GEARED = load_scene("geared_arm").replace(friction=None, joint_limits=None, tolerance=0.0,
-                                          integrator="exponential_rk4")
+GEARED = load_scene("geared_arm").replace(friction=None, joint_limits=None, tolerance=0.0)
 
 
 def test_phi_functions_agree_across_the_series_switch_and_give_rk4_at_zero():
@@ -51,15 +50,16 @@ def test_without_windings_it_is_rk4_bit_for_bit():
     assert a.state == b.state
 
 
-def test_geared_arm_at_1ms_takes_no_planned_sub_steps_where_rk4_takes_three():
+def test_geared_arm_at_1ms_is_exponential_rk4_with_no_planned_sub_steps_where_rk4_takes_three():
     scene = load_scene("geared_arm")
-    assert Simulator(scene).substeps == 3
-    assert Simulator(scene.replace(integrator="exponential_rk4")).substeps == 1
+    assert scene.integrator == "exponential_rk4"
+    assert Simulator(scene).substeps == 1
+    assert Simulator(scene.replace(integrator="rk4")).substeps == 3
 
 
 def test_the_step_is_stable_where_the_plan_says_and_the_winding_stays_passive():
     # test problem i' = -x i - w u, u' = w i: |amplification| <= 1 at the planned step
-    sim = Simulator(load_scene("geared_arm").replace(integrator="exponential_rk4"))
+    sim = Simulator(load_scene("geared_arm"))
     motors = next(e for e in sim.dynamics.active if e.name == "motors")
     for lam, p in motors.coupling(sim.arm):
         x = sim.step_size / sim.substeps * lam
@@ -80,3 +80,20 @@ def test_fourth_order_in_the_mechanics_against_the_first_principles_reference():
     assert min(orders) > 3.5, (errors, orders)
     assert errors[0] < 1e-5
 
+
+
+def test_geared_arm_as_shipped_meets_its_tolerance_and_its_books_close():
+    # friction, limits and clamps located as events, default tolerance, commanded from rest;
+    # the truth: rk4 (3 sub-steps) at a tolerance 5e5 times tighter
+    scene, seconds = load_scene("geared_arm"), 0.5
+    runs = []
+    for method, tolerance in (("exponential_rk4", scene.tolerance), ("rk4", 1e-10)):
+        sim = Simulator(scene.replace(integrator=method, tolerance=tolerance))
+        sim.set_command(10.0, -4.0)
+        runs.append((sim, sim.run(seconds)))
+    (sim, largest), (truth, _) = runs
+    error = max(abs(a - b) for a, b in zip(sim.state[:4], truth.state[:4]))
+    assert error <= scene.tolerance * seconds
+    assert sim.substeps == 1 and sim.substeps_taken < sim.steps     # the tolerance splits few
+    moved = max(abs(v) for v in sim.channel_values(sim.state).values())
+    assert largest <= 1e-6 * moved, (largest, moved)

@@ -18,7 +18,7 @@ import numpy as np
 from . import compiled, stability
 from .dynamics import build_dynamics
 from .effects import Damping, Gravity
-from .integrators import INTEGRATORS, compile_step
+from .integrators import INTEGRATORS, step_for
 from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
 from .simulator import Simulator
@@ -67,8 +67,8 @@ class Batch:
         if unknown:
             raise SceneError(f"{unknown[0]!r} cannot vary per arm; per-arm parameters: "
                              f"{', '.join(SCALAR_PARAMETERS + PAIR_PARAMETERS)}")
-        if scene.integrator != "rk4":
-            raise SceneError(f"batch rollouts use rk4; scene asks for {scene.integrator!r}")
+        if scene.integrator not in ("rk4", "exponential_rk4"):   # steps that run on arrays too
+            raise SceneError(f"batch rollouts use rk4 or exponential_rk4, not {scene.integrator!r}")
         switching = [name for name in ("friction", "joint_limits") if getattr(scene, name)]
         if switching:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
@@ -149,7 +149,7 @@ class Batch:
         self._namespace = dict(dynamics.function.__globals__, cos=np.cos, sin=np.sin,
                                MIN=np.minimum, MAX=np.maximum)
         self._code = compile(dynamics.source, f"<batch rhs {scene.policy}>", "exec")
-        self._step = compile_step(INTEGRATORS["rk4"], len(self.channels), extra=len(self.extra))
+        self._step = step_for(INTEGRATORS[scene.integrator], len(self.channels), dynamics.decay)
         self.substeps = self._worst_substeps(scene, v, arm)
         self._kernel = None
         if compiled.compilable(dynamics, self._step):   # every arm in one compiled call
@@ -165,7 +165,7 @@ class Batch:
         """Every arm `steps` steps in one compiled call, arms split over `threads`."""
         numba = compiled.numba
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-        values = dict(self._namespace, **self._constants)
+        values = dict(self._namespace, **getattr(self._step, "constants", {}), **self._constants)
         columns = [*self.command, *(np.broadcast_to(values[k], (self.count,)) for k in self._names)]
         parameters = np.ascontiguousarray(np.stack(columns, axis=1), dtype=float)
         state = np.array(self.state)
@@ -237,7 +237,7 @@ class Batch:
             target[chunk] = value
 
     def run(self, steps: int, threads: int = 1) -> None:
-        """Advance every arm by `steps` RK4 steps."""
+        """Advance every arm by `steps` steps of the scene's method."""
         if steps < 0:
             raise SceneError(f"steps = {steps} must not be negative")
         if self._kernel is not None:
