@@ -131,6 +131,19 @@ def test_lockstep_wait_ticks_on_its_own_only_once_no_tick_came_for_that_long():
     assert never.tick() is None and never.sim.steps == 0
 
 
+def test_an_all_nan_joint_state_ticks_a_lockstep_node_and_commands_nothing():
+    """ros2_control's hardware interface sends NaN on every command interface no controller
+    claims; controller_manager's next cycle waits for the tick it asks for, so a controller
+    switch (which takes a cycle) could not happen while none is active (seen on 4.46)."""
+    core = lockstep_core(FakeClock(), publish_rate=100.0)
+    core.on_command([2.0, 1.0])
+    nan = float("nan")
+    names = ["shoulder_joint", "elbow_joint"]
+    assert core.on_joint_state_command(names, [], [], [nan, nan]) is None
+    assert len(core.take_lockstep_states()) == 2 and core.command == (2.0, 1.0)
+    assert core.refused_commands == 0
+
+
 @pytest.mark.parametrize("wait", [-0.1, float("nan"), float("inf"), 1e9])
 def test_lockstep_wait_is_a_bounded_wall_time(wait):
     with pytest.raises(ParameterRefused, match="lockstep_wait"):
