@@ -66,6 +66,10 @@ def controlled(context):
         parameters=[{'scene': ParameterValue(LaunchConfiguration('scene'), value_type=str),
                      'policy': ParameterValue(LaunchConfiguration('policy'), value_type=str),
                      'lockstep': ParameterValue(LaunchConfiguration('lockstep'), value_type=bool),
+                     # under use_sim_time controller_manager waits for /clock to move before
+                     # its first command (and after lockstep is switched on): a lockstep
+                     # node then ticks on its own each 0.1 s without one
+                     'lockstep_wait': 0.1,
                      'publish_clock': True} | servo],   # default topics
     )
     spawner = Node(package='controller_manager', executable='spawner', output='screen',

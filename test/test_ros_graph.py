@@ -112,6 +112,44 @@ def test_lockstep_ticks_are_never_late_however_far_apart_the_commands_come():
     assert core.diagnostics().level == OK
 
 
+def test_lockstep_wait_ticks_on_its_own_only_once_no_tick_came_for_that_long():
+    """controller_manager under use_sim_time sends nothing until /clock has moved (and a
+    period more): a lockstep node that only waited would deadlock with it."""
+    clock = FakeClock()
+    core = lockstep_core(clock, lockstep_wait=0.1)
+    assert core.tick() is not None and core.sim.time == pytest.approx(0.01)   # at start
+    clock.now += 0.09
+    assert core.tick() is None
+    clock.now += 0.01
+    assert core.tick() is not None and core.sim.time == pytest.approx(0.02)   # 0.1 s later
+    clock.now += 0.05
+    core.on_command([0.5, 0.0])                 # a command ticks, and the wait starts again
+    clock.now += 0.09
+    assert core.tick() is None and core.sim.time == pytest.approx(0.03)
+    never = lockstep_core(clock)                # 0, the default: commands only
+    clock.now += 1e6
+    assert never.tick() is None and never.sim.steps == 0
+
+
+def test_an_all_nan_joint_state_ticks_a_lockstep_node_and_commands_nothing():
+    """ros2_control's hardware interface sends NaN on every command interface no controller
+    claims; controller_manager's next cycle waits for the tick it asks for, so a controller
+    switch (which takes a cycle) could not happen while none is active (seen on 4.46)."""
+    core = lockstep_core(FakeClock(), publish_rate=100.0)
+    core.on_command([2.0, 1.0])
+    nan = float("nan")
+    names = ["shoulder_joint", "elbow_joint"]
+    assert core.on_joint_state_command(names, [], [], [nan, nan]) is None
+    assert len(core.take_lockstep_states()) == 2 and core.command == (2.0, 1.0)
+    assert core.refused_commands == 0
+
+
+@pytest.mark.parametrize("wait", [-0.1, float("nan"), float("inf"), 1e9])
+def test_lockstep_wait_is_a_bounded_wall_time(wait):
+    with pytest.raises(ParameterRefused, match="lockstep_wait"):
+        resolve_parameters({"lockstep_wait": wait})
+
+
 @pytest.mark.parametrize("real_time_factor", [0.0, 1.0])
 def test_the_tick_timer_of_a_lockstep_node_returns_at_once(real_time_factor):
     """The rclpy transport's timer callback (TickSchedule.run_due): in lockstep the commands

@@ -176,6 +176,38 @@ def test_lockstep_publishes_the_clock_while_it_waits_for_the_first_command():
     assert not spinning.is_alive() and node.core.sim.time == pytest.approx(0.02)
 
 
+def test_lockstep_runs_with_a_controller_that_waits_for_the_clock_to_move():
+    """controller_manager (Jazzy, ros2_control_node) under use_sim_time: it waits for a
+    non-zero time, sleeps one period of it, then commands once per period of /clock. With
+    lockstep_wait the node ticks on its own until the commands come, then one per command."""
+    node, peer = start(204, clock=time.monotonic, lockstep=True, lockstep_wait=0.05,
+                       real_time_factor=0.0)
+    _, clock = readers(peer)
+    commands = DataWriter(peer, Topic(peer, "rt/joint_torque_commands", msg.Float64MultiArray),
+                          qos=msg.default_qos(msg.Float64MultiArray))
+    wait_until(lambda: msg.matched(node.clock_writer) and msg.matched(commands), "not matched")
+    spinning = threading.Thread(target=node.spin, kwargs={"duration_s": 0.5}, daemon=True)
+    spinning.start()
+    latest, period, sent = [0], 10_000_000, 0
+
+    def now():
+        latest.extend(stamp(m.clock) for m in clock.take(N=1000) if isinstance(m, msg.Clock))
+        return max(latest)
+
+    deadline = time.monotonic() + 2 * TIMEOUT
+    while now() == 0 and time.monotonic() < deadline:       # wait_until_started
+        time.sleep(0.001)
+    due = now() + period                                      # sleep_for(period)
+    while spinning.is_alive() and time.monotonic() < deadline:
+        if now() >= due:
+            commands.write(msg.Float64MultiArray(data=[0.0, 0.0]))
+            sent, due = sent + 1, due + period
+        time.sleep(0.001)
+    spinning.join(TIMEOUT)
+    assert not spinning.is_alive() and node.core.sim.time >= 0.5 - 1e-9
+    assert sent >= 30                   # the commands ticked it, not the wait (50 ms each)
+
+
 def read_at_least(reader, kind, count):
     received, deadline = [], time.monotonic() + TIMEOUT
     while len(received) < count and time.monotonic() < deadline:

@@ -31,6 +31,8 @@ class CommandInput:
             self.recorder.refused(reason)
         elif command is not None or setpoints:
             self._set_command(*self.commands.value, setpoints)
-            if self.config.values["lockstep"] and not self.paused:   # a tick per command
-                self.lockstep_states.append(self._tick())
+        if reason is None and self.config.values["lockstep"] and not self.paused:
+            # a tick per command, an all-NaN one too (ros2_control's hardware sends those
+            # while no controller claims the joints: controller_manager's cycles wait on it)
+            self.lockstep_states.append(self._tick())
         return reason

@@ -118,12 +118,18 @@ class ArmSimCore(CommandInput):
             self._event(live_change(names, config.values, self.sim.time))
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
-        """One timer tick: steps_per_tick RK4 steps, then the JointState to publish; None in
-        lockstep, where each command ticks instead (lockstep_states holds their JointStates
-        until the transport publishes them). Paused: the held state, time standing still."""
+        """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
+        lockstep each command ticks instead (lockstep_states holds their JointStates until
+        the transport publishes them): None, unless no tick came for lockstep_wait. Paused:
+        the held state, time standing still."""
         if self.paused:
             return self.joint_state()
-        return None if self.config.values["lockstep"] else self._tick(wall_now)
+        if not self.config.values["lockstep"]:
+            return self._tick(wall_now)
+        wait = self.config.values["lockstep_wait"]
+        now = self.wall_clock() if wall_now is None else wall_now
+        last = self._last_tick_wall
+        return self._tick(now) if wait and (last is None or now - last >= wait) else None
 
     def step_ticks(self, count: int) -> list:
         """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""

@@ -174,6 +174,9 @@ PARAMETERS = (
                   "start + simulated time)", when=START),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
+    ParameterSpec("lockstep_wait", "float", 0.0, "in lockstep, a tick of its own once no "
+                  "command came for this long (wall s; 0 = never): controller_manager under "
+                  "use_sim_time waits for the clock to move before it commands"),
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
@@ -353,6 +356,8 @@ def _check_node_values(values: dict) -> None:
         ("real_time_factor", values["real_time_factor"] >= 0,
          "must be >= 0 (0 = as fast as possible)"),
         ("command_timeout", values["command_timeout"] >= 0, "must be >= 0 (0 = hold forever)"),
+        ("lockstep_wait", 0 <= values["lockstep_wait"] <= MAX_WALL_PERIOD,
+         f"must be within [0, {MAX_WALL_PERIOD:g}] (wall s; 0 = wait for commands forever)"),
         ("torque_limit", values["torque_limit"] > 0, "must be positive (N m)"),
         ("joint_names", len(values["joint_names"]) == 2, "needs exactly two names"),
         ("clock_origin", values["clock_origin"] in CLOCK_ORIGINS,

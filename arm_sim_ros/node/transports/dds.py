@@ -180,7 +180,7 @@ class DdsArmSimNode:
             now = self.wall_clock()
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
-                if not self.take_commands(timeout=LOCKSTEP_WAIT):
+                if not self.take_commands(timeout=LOCKSTEP_WAIT) and self.tick(now) is None:
                     self._publish_clock()              # the time, while nobody commands
             elif schedule.wait(now) > 0:
                 # sleep, serving, in slices: a signal is handled and a new period (a
