@@ -18,7 +18,7 @@ from arm_sim_ros.node.transports import dds_action as d
 from arm_sim_ros.node.transports import dds_simulation
 from arm_sim_ros.tools.sim_client import SimulationClient
 from test_dds_services import Client, start
-from test_node_dds import CONFIG, wait_until
+from test_node_dds import CONFIG, FakeClock, wait_until
 from test_simulation_interfaces import read, readers, sim_client
 
 # The definitions the hashes cover (fields only): SimulateSteps.action (simulation_interfaces,
@@ -222,14 +222,6 @@ def test_the_harness_client_runs_the_action():
     assert (status, code) == (a.STATUS_ABORTED, s.RESULT_OPERATION_FAILED) and "paused" in message
 
 
-class Clock:
-    def __init__(self):
-        self.ns = 0
-
-    def __call__(self):
-        return self.ns
-
-
 class Control:
     """A paused SimulationControl that counts its ticks."""
     state, ticks = s.STATE_PAUSED, 0
@@ -243,17 +235,18 @@ def test_a_goals_first_tick_waits_a_moment_for_a_reader_of_its_feedback():
     """A client that has just found the server may not be matched with its feedback yet
     (ros2 action send_goal --feedback showed 2 to 4 of 20): the goal waits for a reader, up
     to FEEDBACK_WAIT, then runs whether or not one came."""
-    clock, control = Clock(), Control()
+    clock, control = FakeClock(), Control()
+    clock.now = 0                                   # ns, as rcl_action stamps
     goals = a.StepsGoals(control, clock)
     goals.send_goal(bytes(range(16)), 3)
     assert goals.advance(listening=False) is None and control.ticks == 0
-    clock.ns += int(0.9 * a.FEEDBACK_WAIT * 1e9)
+    clock.now += int(0.9 * a.FEEDBACK_WAIT * 1e9)
     assert goals.advance(listening=False) is None and control.ticks == 0
     assert goals.advance(listening=True).completed == 1             # a reader came
     assert goals.advance(listening=False).completed == 2            # the first tick only
     unheard = a.StepsGoals(control, clock)
     unheard.send_goal(bytes(range(1, 17)), 1)
-    clock.ns += int(a.FEEDBACK_WAIT * 1e9)
+    clock.now += int(a.FEEDBACK_WAIT * 1e9)
     assert unheard.advance(listening=False).status == a.STATUS_SUCCEEDED   # nobody: runs
 
 
