@@ -10,8 +10,7 @@ summed), the controller's count, the schedule, the divergence checks and the lar
 |residual|, as kernels.run_books does for a smooth scene. It hands back to Python, before
 taking it, every step in which anything could switch: a switching function negative at a
 sub-step's end, or one that events.py's dense check (dense.ended: the same Hermite
-instants, the same operations) would re-step to; a sliding joint in Stribeck's dip (its
-step is always checked); a driver within 1e-9 of its voltage limit (its count is
+instants, the same operations) would re-step to; a driver within 1e-9 of its voltage limit (its count is
 Python's); anything run_books hands back. Python retakes that step from the same state,
 so it cannot be missed: the rule errs only toward handing back.
 """
@@ -150,7 +149,8 @@ def checked_step(state, h, n, K, E, G, states, factor):
 def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
     """run_books for a switching scene in one mode: up to `left` steps from y, each handed
     back (code 1) where anything could switch. X: (sliding joint 1, sliding joint 2, the
-    Stribeck dip's edge |q̇|, a driver's check on); E scratch."""
+    Stribeck dip's edge |q̇| within which a sliding joint's step is checked, a driver's
+    check on); E scratch."""
     steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
     floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
     order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
@@ -161,11 +161,11 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
     shade = ({zitems},)
     done, code, sound = 0, 0, -1
     while done < left:
-        if (X[0] != 0.0 and abs(state[2]) < X[2]) or (X[1] != 0.0 and abs(state[3]) < X[2]):
-            code = 1                          # Stribeck's dip: the step is checked (Python)
-            break
+        # a check when due, and a joint sliding through Stribeck's dip: always (events.steep)
+        check = steps >= due or (X[0] != 0.0 and abs(state[2]) < X[2]) or (
+            X[1] != 0.0 and abs(state[3]) < X[2])
         new_every, wanted = every, n
-        if steps < due:                       # a plain step, the shadow beside it
+        if not check:                         # a plain step, the shadow beside it
             new, ends = smooth_step(state, h, n, K, E)
             if ends or not finite(new):
                 code = 1
@@ -207,7 +207,7 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
             code = 1
             break
         # the shadow: its twin's step in the same mode (shadow.Twin, Shadow.follow)
-        local_known = known == 1 or steps >= due
+        local_known = known == 1 or check
         now_lost, now_far, now_shade = lost, far, shade
         if local_known and lost == 0:
             if zvalid == 0:                   # its twin finds its mode afresh: Python's
@@ -218,7 +218,7 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
                 code = 1
                 break
             for k in range({width}):
-                z[k] = z1[k] - (G[k] if steps >= due else L[k]) if k < states else z1[k]
+                z[k] = z1[k] - (G[k] if check else L[k]) if k < states else z1[k]
             now_shade = ({zitems},)
             o0, o1, o2, o3 = new[0] - z[0], new[1] - z[1], new[2] - z[2], new[3] - z[3]
             distance = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2)), abs(o3))
@@ -227,7 +227,7 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
             if not scaled_off <= {LOST!r}:
                 now_lost, distance = 1, bigger(far, {LOST!r})
             now_far = bigger(far, distance)
-        if steps >= due:
+        if check:
             if now_lost == 1 and said_lost == 0:      # said by the books: Python's
                 code = 1
                 break
@@ -236,7 +236,9 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
             scale = (n / wanted) ** orderf if wanted != n else 1.0
             for k in range(states):
                 L[k] = G[k] * scale if wanted != n else G[k]
-            n, every, due, known = wanted, new_every, steps + new_every, 1
+            # a first estimate (none predicted): checked again at the next step
+            n, every, due, known = wanted, new_every, steps + (
+                new_every if known == 1 else 1), 1
         if local_known and lost == 0:
             for k in range(states):
                 O[k] = new[k] - z[k]

@@ -1,0 +1,105 @@
+"""A switching scene's compiled run (physics/switch_run.py, switch_kernel.py) takes exactly
+the pure-Python path's steps: in one compiled call while nothing can switch, every step in
+which anything could handed back to Python. States, energy books, error books (shadow,
+controller counts, schedule), switch counts, saturated steps and every message equal the
+pure-Python path's bit for bit, on random scenes of every switching structure the presets
+have, with rk4 and exponential_rk4. Skipped without numba.
+"""
+import os
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+
+pytest.importorskip("numba")
+
+from test_compiled import books, python_and_compiled  # noqa: E402
+
+EXAMPLES = int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 25))   # more by hand: a longer hunt
+FUZZ = settings(max_examples=EXAMPLES, deadline=None,
+                derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+# switching structures: friction (Stribeck), hard and compliant limits, effort clamps, and
+# geared motors with friction, compliant stops, effort and voltage clamps
+PRESETS = ("stick_slip", "limit_impact", "compliant_limit", "effort_limited_hold", "geared_arm")
+# geared_arm without its effort limits: a large command drives the drivers past 24 V
+UNLIMITED = load_scene("geared_arm").replace(effort_limits=None)
+
+
+def everything(sim):
+    return (books(sim), dict(sim.switch_events), sim.saturated_steps, sim.refused_steps,
+            sim.substeps_taken, sim.accumulated_error, sim.accuracy.twin.mode,
+            sim.switching.mode)
+
+
+def same_runs(scene, commands, durations, monkeypatch):
+    """Both paths through the same runs, the command changed before each; what they leave."""
+    python, fast = python_and_compiled(scene, monkeypatch)
+    assert fast.kernel.switched is not None and python.kernel is None
+    for command, duration in zip(commands, durations):
+        for sim in (python, fast):
+            sim.set_command(*command)
+        assert python.run(duration) == fast.run(duration)
+        assert everything(python) == everything(fast)
+    return python, fast
+
+
+@st.composite
+def switching_scenes(draw):
+    name = draw(st.sampled_from(PRESETS + ("unlimited",)))
+    scene = UNLIMITED if name == "unlimited" else load_scene(name)
+    slow = scene.step_size < 0.005                 # geared: 1 ms steps
+    speed = 1.0 if slow else 4.0
+    scene = scene.replace(
+        integrator=draw(st.sampled_from(["rk4", "exponential_rk4"])),
+        initial_positions=tuple(draw(st.floats(-1.1, 1.1)) for _ in (0, 1)),
+        initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
+        tolerance=draw(st.sampled_from([5e-5, 1e-7, 0.0])))
+    torque = 250.0 if name == "unlimited" else 30.0
+    commands = [tuple(draw(st.floats(-torque, torque)) for _ in (0, 1)) for _ in (0, 1)]
+    return scene, commands, (0.15, 0.1) if slow else (0.6, 0.4)
+
+
+@FUZZ
+@given(case=switching_scenes())
+def test_random_switching_scenes_run_compiled_as_in_python_bit_for_bit(case, monkeypatch):
+    scene, commands, durations = case
+    same_runs(scene, commands, durations, monkeypatch)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "exponential_rk4"])
+@pytest.mark.parametrize("name", PRESETS)
+def test_every_switching_preset_runs_compiled_as_in_python(name, integrator, monkeypatch):
+    scene = load_scene(name).replace(integrator=integrator)
+    seconds = 0.4 if scene.step_size < 0.005 else 3.0
+    python, _ = same_runs(scene, [(0.0, 0.0), (2.0, -1.0)], [seconds / 2, seconds / 2],
+                          monkeypatch)
+    assert sum(python.switch_events.values()) > 0
+
+
+def test_a_driver_past_its_voltage_limit_is_counted_on_the_same_steps(monkeypatch):
+    python, _ = same_runs(UNLIMITED, [(0.0, 0.0), (200.0, -60.0), (0.0, 0.0)],
+                          [0.05, 0.1, 0.1], monkeypatch)
+    assert 0 < python.saturated_steps < 200
+
+
+def python_steps(sim, seconds):
+    """The steps of sim.run(seconds) Python takes (Simulator.step), not the compiled run."""
+    taken, step = [], sim.step
+    sim.step = lambda: (taken.append(sim.steps), step())
+    sim.run(seconds)
+    del sim.step
+    return taken
+
+
+def test_steps_in_which_nothing_can_switch_are_not_taken_by_python():
+    """geared_arm held from rest: after its first steps (the first estimate, the joints
+    sticking) the compiled run takes every step; stick_slip: Python takes the steps around
+    its switches, a few per switch."""
+    held = Simulator(load_scene("geared_arm"))
+    assert len(python_steps(held, 1.0)) <= 10 and held.steps == 1000
+    swinging = Simulator(load_scene("stick_slip"))
+    taken = python_steps(swinging, 6.0)
+    assert len(taken) <= 6 * sum(swinging.switch_events.values()) and swinging.steps == 600
