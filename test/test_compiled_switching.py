@@ -7,6 +7,7 @@ have, with rk4 and exponential_rk4. Skipped without numba.
 """
 import os
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
@@ -103,3 +104,58 @@ def test_steps_in_which_nothing_can_switch_are_not_taken_by_python():
     swinging = Simulator(load_scene("stick_slip"))
     taken = python_steps(swinging, 6.0)
     assert len(taken) <= 6 * sum(swinging.switch_events.values()) and swinging.steps == 600
+
+
+def dense_check(name, mode):
+    """(compiled near, Python's dense.ended, guard, width, state width) of a preset's mode."""
+    sim = Simulator(load_scene(name))
+    rhs, _, guard, kinds, _ = sim.switching.functions(mode)
+    module, K = sim.kernel.switched.steps.module(rhs)
+    return module.near, K, guard, sim.switching.width, len(sim.state)
+
+
+MODES = {"stick_slip": ("+", "-", 0, 0), "limit_impact": ("free", "free", 0, 0),
+         "geared_arm": ("stuck", "+", 0, 0, (0, 0, 0, 0))}
+CHECKS = {name: dense_check(name, mode) for name, mode in MODES.items()}
+near_zero = st.floats(-0.05, 0.05) | st.sampled_from([0.0, 1e-12, -1e-12])
+
+
+def both_checks(name, y0, y1, dt):
+    """(compiled near, dense.ended's answer, whether it re-stepped to a Hermite instant)."""
+    from arm_sim_ros.physics.dense import ended
+    near, K, guard, width, states = CHECKS[name]
+    restepped = []
+
+    def step(rhs, y, t):          # the re-step: here only seen, its state y0's (no switch)
+        restepped.append(t)
+        return y0
+    python = ended(step, None, guard, width, y0, y1, dt) is not None or bool(restepped)
+    return near(y0, y1, dt, K, np.zeros(8)), python, bool(restepped)
+
+
+@FUZZ
+@given(name=st.sampled_from(sorted(MODES)), dt=st.sampled_from([1e-3, 1e-2]),
+       q0=st.tuples(st.floats(-2.05, 2.05), st.floats(-2.05, 2.05)),
+       dq=st.tuples(near_zero, near_zero), u0=st.tuples(near_zero, near_zero),
+       u1=st.tuples(near_zero, near_zero), currents=st.tuples(st.floats(-9, 9), st.floats(-9, 9)))
+def test_the_compiled_dense_check_hands_back_every_sub_step_dense_ended_would_cut(
+        name, dt, q0, dq, u0, u1, currents):
+    """The compiled run's check of a sub-step (switch_kernel.near) is True exactly where
+    dense.ended ends the mode or re-steps to a Hermite instant: the same switching
+    functions at the same instants, the same operations (the re-step is left to Python)."""
+    states = CHECKS[name][4]
+    pad = (0.0,) * (states - 6)
+    y0 = (*q0, *u0, *currents, *pad)[:states]
+    y1 = (q0[0] + dt * dq[0], q0[1] + dt * dq[1], *u1, *currents, *pad)[:states]
+    compiled, python, _ = both_checks(name, y0, y1, dt)
+    assert compiled == python
+
+
+@pytest.mark.parametrize("u1, q1, expected, restepped", [
+    ((0.01, -0.01), (0.0, 0.0), True, True),      # joint 1's q̇ dips below 0 and back
+    ((-0.01, -0.01), (0.0, 0.0), True, False),    # ... and ends below 0
+    ((0.01, -0.01), (1e-4, -1e-4), False, False)])  # moves on, slides on
+def test_a_sliding_joints_stop_inside_a_sub_step_is_handed_back(u1, q1, expected, restepped):
+    extra = (0.0,) * (CHECKS["stick_slip"][4] - 4)
+    y0, y1 = (0.0, 0.0, 0.01, -0.01, *extra), (*q1, *u1, *extra)
+    assert both_checks("stick_slip", y0, y1, 0.01) == (expected, expected, restepped)
