@@ -9,7 +9,8 @@ Simulator.run takes step by step on a smooth scene: the planned sub-steps, the e
 books' shadow and checks, the divergence checks and the largest |energy balance residual|,
 handing back to Python each step where something is to be said; another advances every arm
 of a Batch, arms in parallel. A switching scene's modes (events.py) each get their rhs
-compiled with the step when first met.
+compiled with the step when first met, with the mode's switching functions and a run of
+its steps in which nothing can switch (switch_kernel.py, switch_run.py).
 
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit

@@ -37,7 +37,7 @@ class Switched:
             return 0, largest, 1
         module, K = compiled
         friction, mode = stepper.friction, stepper.mode
-        edge = STEEP * friction.stribeck_velocity if friction is not None else 0.0
+        edge = STEEP * (friction.stribeck_velocity or 0.0) if friction is not None else 0.0
         self.X[:] = (edge > 0.0 and mode[0] in ("+", "-"), edge > 0.0 and mode[1] in ("+", "-"),
                      edge, self.driven)
         since = books.since
