@@ -14,6 +14,7 @@ instants, the same operations) would re-step to; a driver within 1e-9 of its vol
 Python's); anything run_books hands back. Python retakes that step from the same state,
 so it cannot be missed: the rule errs only toward handing back.
 """
+from .kernels import run_loop
 
 SWITCH_KERNEL = '''
 from math import sqrt
@@ -145,41 +146,30 @@ def checked_step(state, h, n, K, E, G, states, factor):
     return state, False, total, scaled
 
 
-@njit(cache=True)
-def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
-    """run_books for a switching scene in one mode: up to `left` steps from y, each handed
-    back (code 1) where anything could switch. X: (sliding joint 1, sliding joint 2, the
-    Stribeck dip's edge |q̇| within which a sliding joint's step is checked, a driver's
-    check on); E scratch."""
-    steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
-    floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
-    order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
-    h, E0, R0, R1, largest, far, in_play = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
-    estimate, previous, tolerance, den, target = F[7], F[8], F[9], F[10], F[11]
-    factor, lowest, orderf = F[12], F[13], F[14]
-    state = ({items},)
-    shade = ({zitems},)
-    done, code, sound = 0, 0, -1
-    while done < left:
-        # a check when due, and a joint sliding through Stribeck's dip: always (events.steep)
+'''
+
+
+SWITCH_PARTS = dict(    # run_switching: a switching scene's steps in one mode
+    NAME="run_switching", MORE=", X, E",
+    # a first estimate (none predicted, accuracy.book's `soon`): checked at the next step
+    NEXT="(new_every if known == 1 else 1)",
+    DOC='''run_books for a switching scene in one mode: up to `left` steps from y, each
+    handed back (code 1) where anything could switch. X: (sliding joint 1, sliding joint 2,
+    the Stribeck dip's edge |q̇| within which a sliding joint's step is checked, a driver's
+    check on); E scratch.''',
+    CHECK='''        # a check when due, and a joint sliding through Stribeck's dip: always (events.steep)
         check = steps >= due or (X[0] != 0.0 and abs(state[2]) < X[2]) or (
-            X[1] != 0.0 and abs(state[3]) < X[2])
-        new_every, wanted = every, n
-        if not check:                         # a plain step, the shadow beside it
-            new, ends = smooth_step(state, h, n, K, E)
+            X[1] != 0.0 and abs(state[3]) < X[2])''',
+    PLAIN='''            new, ends = smooth_step(state, h, n, K, E)
             if ends or not finite(new):
                 code = 1
-                break
-        else:                                 # a check: every sub-step doubled
-            new, ends, total, summed = checked_step(state, h, n, K, E, G, states, factor)
+                break''',
+    CHECKED='''            new, ends, total, summed = checked_step(state, h, n, K, E, G, states, factor)
             if ends or not finite(new):
                 code = 1
                 break
             error, scaled = total + 0.0, summed + 0.0
-            ok = True
-            for k in range(states):
-                ok = ok and isfinite(G[k])
-            if not ok:
+            if not measured(G, states):
                 code = 1
                 break
             kept = previous
@@ -190,86 +180,18 @@ def run_switching(y, z, L, O, G, S, I, F, K, C, left, X, E):
                 wanted, kept = ask(n, summed / den, previous, order, floor, fcap)
                 if wanted > most and wanted > 2 * max(1, most):   # said: Python's
                     code = 1
-                    break
-            if known == 1:                    # shadow.next_every
-                change, size = 0.0, 0.0
-                for k in range(4):
-                    change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
-                for k in range(4):
-                    size = bigger(size, abs(G[k])) if k else abs(G[k])
-                for k in range(4):
-                    size = bigger(size, abs(L[k]))
-                if change > {ROUGH!r} * size:
-                    new_every = max({MIN_EVERY!r}, every // 2)
-                elif change < {SMOOTH!r} * size:
-                    new_every = min({MAX_EVERY!r}, 2 * every)
-        if X[3] != 0.0 and driven(new, K) >= 0.0:   # the driver's count: Python's
+                    break''',
+    AFTER='''        if X[3] != 0.0 and driven(new, K) >= 0.0:   # the driver's count: Python's
             code = 1
-            break
-        # the shadow: its twin's step in the same mode (shadow.Twin, Shadow.follow)
-        local_known = known == 1 or check
-        now_lost, now_far, now_shade = lost, far, shade
-        if local_known and lost == 0:
-            if zvalid == 0:                   # its twin finds its mode afresh: Python's
+            break''',
+    SHADOW='''            if zvalid == 0:                   # its twin finds its mode afresh: Python's
                 code = 1
                 break
-            z1, ends = smooth_step(shade, h, n, K, E)
+            z1, ends = smooth_step(shade, h, n, K, E)   # its twin's step in the same mode
             if ends:
                 code = 1
-                break
-            for k in range({width}):
-                z[k] = z1[k] - (G[k] if check else L[k]) if k < states else z1[k]
-            now_shade = ({zitems},)
-            o0, o1, o2, o3 = new[0] - z[0], new[1] - z[1], new[2] - z[2], new[3] - z[3]
-            distance = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2)), abs(o3))
-            scaled_off = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2) / (1.0 + abs(new[2]))),
-                                abs(o3) / (1.0 + abs(new[3])))
-            if not scaled_off <= {LOST!r}:
-                now_lost, distance = 1, bigger(far, {LOST!r})
-            now_far = bigger(far, distance)
-        if check:
-            if now_lost == 1 and said_lost == 0:      # said by the books: Python's
-                code = 1
-                break
-            taken += (n * (steps - since) if n > 1 else 0) + (n if n > 1 else 0)
-            since, estimate, previous = steps + 1, error, kept
-            scale = (n / wanted) ** orderf if wanted != n else 1.0
-            for k in range(states):
-                L[k] = G[k] * scale if wanted != n else G[k]
-            # a first estimate (none predicted): checked again at the next step
-            n, every, due, known = wanted, new_every, steps + (
-                new_every if known == 1 else 1), 1
-        if local_known and lost == 0:
-            for k in range(states):
-                O[k] = new[k] - z[k]
-            zvalid, shade = 1, now_shade
-        lost, far = now_lost, now_far
-        state = new
-        steps += 1
-        done += 1
-        if steps % {CHECK_EVERY!r} == 0:      # guard.divergence and guard.audit
-            r = residual(state, C, E0, R0, R1)
-            expected = E0 - lowest + abs(inputs(state, R0))
-            if not abs(r) <= {FLOOR!r} + bigger(in_play, expected) or not bigger(
-                    abs(state[0]), abs(state[1])) <= {MAX_ANGLE!r}:
-                code = 2
-                break
-            play = bigger(in_play, energy(state, C) - lowest)
-            if fault == 0 and not abs(r) <= {BOOKS_FRACTION!r} * ({FLOOR!r} + bigger(
-                    play, expected)):
-                code = 2
-                break
-            in_play, sound = play, steps
-            for k in range({width}):
-                S[k] = state[k]
-        largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
-    for k in range({width}):
-        y[k], z[k] = state[k], shade[k]
-    I[0], I[1], I[2], I[3], I[4], I[5] = steps, due, since, taken, n, every
-    I[13], I[14], I[15] = known, zvalid, lost
-    F[4], F[5], F[6], F[7], F[8] = largest, far, in_play, estimate, previous
-    return done, code, sound
-'''
+                break''')
+SWITCH_KERNEL += run_loop(**SWITCH_PARTS)
 
 
 def driver_source(dynamics) -> str:
