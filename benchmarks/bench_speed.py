@@ -6,8 +6,9 @@ sub-steps and MuJoCo's first-order dcmotor at equal step size.
 Columns (µs per simulated second, and steps per second):
   python     Simulator.run with ARM_SIM_COMPILED=0 (today's path), default tolerance
   compiled   Simulator.run on the compiled path (compiled.py), the same steps bit for bit:
-             runs of plain steps in one call; switching scenes (events.py) step each mode's
-             compiled step from Python
+             runs of plain steps in one call; switching scenes (events.py) too, each run
+             of steps in one mode where nothing can switch (switch_run.py), the others
+             from Python
   mujoco     mj_step in a Python loop, RK4, the scene built by tools/mujoco_peer (only where
              it models the same physics: no soft friction or limits, no controller model)
   limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
