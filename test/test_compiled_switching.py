@@ -5,7 +5,9 @@ controller counts, schedule), switch counts, saturated steps and every message e
 pure-Python path's bit for bit, on random scenes of every switching structure the presets
 have, with rk4 and exponential_rk4. Skipped without numba.
 """
+import functools
 import os
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -86,6 +88,12 @@ def test_a_driver_past_its_voltage_limit_is_counted_on_the_same_steps(monkeypatc
     assert 0 < python.saturated_steps < 200
 
 
+def compiled_simulator(scene):
+    """A simulator on the compiled path (whatever ARM_SIM_COMPILED says)."""
+    with mock.patch.dict(os.environ, {"ARM_SIM_COMPILED": "1"}):
+        return Simulator(scene)
+
+
 def python_steps(sim, seconds):
     """The steps of sim.run(seconds) Python takes (Simulator.step), not the compiled run."""
     taken, step = [], sim.step
@@ -99,16 +107,18 @@ def test_steps_in_which_nothing_can_switch_are_not_taken_by_python():
     """geared_arm held from rest: after its first steps (the first estimate, the joints
     sticking) the compiled run takes every step; stick_slip: Python takes the steps around
     its switches, a few per switch."""
-    held = Simulator(load_scene("geared_arm"))
+    held = compiled_simulator(load_scene("geared_arm"))
     assert len(python_steps(held, 1.0)) <= 10 and held.steps == 1000
-    swinging = Simulator(load_scene("stick_slip"))
+    swinging = compiled_simulator(load_scene("stick_slip"))
     taken = python_steps(swinging, 6.0)
     assert len(taken) <= 6 * sum(swinging.switch_events.values()) and swinging.steps == 600
 
 
-def dense_check(name, mode):
-    """(compiled near, Python's dense.ended, guard, width, state width) of a preset's mode."""
-    sim = Simulator(load_scene(name))
+@functools.cache
+def dense_check(name):
+    """(compiled near, its K, the mode's guard, width, state width) of a preset's mode."""
+    sim = compiled_simulator(load_scene(name))
+    mode = MODES[name]
     rhs, _, guard, kinds, _ = sim.switching.functions(mode)
     module, K = sim.kernel.switched.steps.module(rhs)
     return module.near, K, guard, sim.switching.width, len(sim.state)
@@ -116,14 +126,13 @@ def dense_check(name, mode):
 
 MODES = {"stick_slip": ("+", "-", 0, 0), "limit_impact": ("free", "free", 0, 0),
          "geared_arm": ("stuck", "+", 0, 0, (0, 0, 0, 0))}
-CHECKS = {name: dense_check(name, mode) for name, mode in MODES.items()}
 near_zero = st.floats(-0.05, 0.05) | st.sampled_from([0.0, 1e-12, -1e-12])
 
 
 def both_checks(name, y0, y1, dt):
     """(compiled near, dense.ended's answer, whether it re-stepped to a Hermite instant)."""
     from arm_sim_ros.physics.dense import ended
-    near, K, guard, width, states = CHECKS[name]
+    near, K, guard, width, states = dense_check(name)
     restepped = []
 
     def step(rhs, y, t):          # the re-step: here only seen, its state y0's (no switch)
@@ -143,7 +152,7 @@ def test_the_compiled_dense_check_hands_back_every_sub_step_dense_ended_would_cu
     """The compiled run's check of a sub-step (switch_kernel.near) is True exactly where
     dense.ended ends the mode or re-steps to a Hermite instant: the same switching
     functions at the same instants, the same operations (the re-step is left to Python)."""
-    states = CHECKS[name][4]
+    states = dense_check(name)[4]
     pad = (0.0,) * (states - 6)
     y0 = (*q0, *u0, *currents, *pad)[:states]
     y1 = (q0[0] + dt * dq[0], q0[1] + dt * dq[1], *u1, *currents, *pad)[:states]
@@ -156,6 +165,6 @@ def test_the_compiled_dense_check_hands_back_every_sub_step_dense_ended_would_cu
     ((-0.01, -0.01), (0.0, 0.0), True, False),    # ... and ends below 0
     ((0.01, -0.01), (1e-4, -1e-4), False, False)])  # moves on, slides on
 def test_a_sliding_joints_stop_inside_a_sub_step_is_handed_back(u1, q1, expected, restepped):
-    extra = (0.0,) * (CHECKS["stick_slip"][4] - 4)
+    extra = (0.0,) * (dense_check("stick_slip")[4] - 4)
     y0, y1 = (0.0, 0.0, 0.01, -0.01, *extra), (*q1, *u1, *extra)
     assert both_checks("stick_slip", y0, y1, 0.01) == (expected, expected, restepped)
