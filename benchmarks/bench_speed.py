@@ -6,8 +6,9 @@ sub-steps and MuJoCo's first-order dcmotor at equal step size.
 Columns (µs per simulated second, and steps per second):
   python     Simulator.run with ARM_SIM_COMPILED=0 (today's path), default tolerance
   compiled   Simulator.run on the compiled path (compiled.py), the same steps bit for bit:
-             runs of plain steps in one call; switching scenes (events.py) step each mode's
-             compiled step from Python
+             runs of plain steps in one call; switching scenes (events.py) too, each run
+             of steps in one mode where nothing can switch (switch_run.py), the others
+             from Python
   mujoco     mj_step in a Python loop, RK4, the scene built by tools/mujoco_peer (only where
              it models the same physics: no soft friction or limits, no controller model)
   limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
@@ -105,12 +106,12 @@ def time_mujoco(scene, seconds: float, repeat: int):
     return fastest(run, repeat), ""
 
 
-def presets_table(seconds: float, repeat: int) -> list[str]:
+def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
     head = (f"{'preset':<30}{'h':>7}{'sub':>4} {'python':>9} {'compiled':>9} {'mujoco':>9} "
             f"{'limit':>8} {'speed-up':>8} {'of limit':>8}  path / first compile")
     lines = [f"µs per simulated second (steps/s below each), {seconds:g} s runs, best of {repeat}",
              head, "-" * len(head)]
-    for name in preset_names():
+    for name in only or preset_names():
         scene = load_scene(name)
         py, _, _ = time_run(scene, seconds, repeat, False)
         fast, path, first = time_run(scene, seconds, repeat, True)
@@ -216,6 +217,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--arms", type=int, default=20000)
     parser.add_argument("--batch-steps", type=int, default=500)
+    parser.add_argument("--only", help="these presets (comma-separated) alone, no other table")
     args = parser.parse_args()
     if not compiled.available():
         sys.exit("bench_speed: numba is not installed: pip install -e '.[fast]'")
@@ -223,6 +225,9 @@ def main() -> None:
     import numba
     print(f"numba {numba.__version__}, mujoco {mujoco.__version__}, numpy {np.__version__}, "
           f"{os.cpu_count()} CPUs")
+    if args.only:
+        print("\n".join(presets_table(args.seconds, args.repeat, args.only.split(","))))
+        return
     for table in (presets_table(args.seconds, args.repeat),
                   batch_table(args.arms, args.batch_steps, args.repeat),
                   windings_table(args.repeat)):

@@ -9,7 +9,8 @@ Simulator.run takes step by step on a smooth scene: the planned sub-steps, the e
 books' shadow and checks, the divergence checks and the largest |energy balance residual|,
 handing back to Python each step where something is to be said; another advances every arm
 of a Batch, arms in parallel. A switching scene's modes (events.py) each get their rhs
-compiled with the step when first met.
+compiled with the step when first met, with the mode's switching functions and a run of
+its steps in which nothing can switch (switch_kernel.py, switch_run.py).
 
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit
@@ -30,6 +31,7 @@ from pathlib import Path
 from . import accuracy, controller, guard, integrators, shadow
 from .controller import SAFETY
 from .kernels import KERNELS
+from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
 from .scene import MAX_INITIAL_ANGLE
 
 try:                      # the optional extra: pip install -e '.[fast]'
@@ -152,14 +154,26 @@ NO_ENERGY = ("@njit(cache=True)\ndef energy(y, K):\n    return 0.0\n\n"
              "@njit(cache=True)\ndef inputs(y, R0):\n    return R0\n")
 
 
-def module_source(dynamics, step, rhs=None):
+def functions_source(text: str, names) -> str:
+    """Generated functions beside a mode's rhs (its probe and guard, the drivers' check),
+    njit, their constants read from K as the rhs reads them."""
+    out = []
+    for block in re.split(r"(?m)^(?=def )", text):
+        if block.strip():
+            out += ["@njit(cache=True)", rhs_source(block, names)]
+    return re.sub(r"probe\(([^)]*)\)\[2:\]", r"probe(\1, K)[2:]", "\n".join(out))
+
+
+def module_source(dynamics, step, rhs=None, guards=""):
     """(source, constant names): the module of rhs (the scene's, or a mode's `rhs` source),
-    step, residual and the kernels, all njit. Constants are read from K (constants_of),
-    not written in: the source, and so the compiled code, depends on the scene's structure
-    only, not on its parameter values (a parameter sweep compiles once)."""
+    step, residual and the kernels, all njit; with a mode's `guards` (its probe and guard
+    source), its switching run too (switch_kernel.py). Constants are read from K
+    (constants_of), not written in: the source, and so the compiled code, depends on the
+    scene's structure only, not on its parameter values (a parameter sweep compiles once)."""
     rhs = dynamics.source if rhs is None else rhs
     values = {**dynamics.function.__globals__, **getattr(step, "constants", {})}
-    found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source))
+    guards = guards and guards + driver_source(dynamics)
+    found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source + guards))
     names = sorted(n for n in found if n in values and isinstance(values[n], (int, float))
                    and not isinstance(values[n], bool))
     lines = ["from math import ceil, cos, exp, isfinite, sin", "from numba import njit, prange", ""]
@@ -173,10 +187,14 @@ def module_source(dynamics, step, rhs=None):
     for function in (rhs_source(rhs, names), step_source(step, names)):
         lines += ["@njit(cache=True)", function]
     lines.append(energy[0] if energy else NO_ENERGY)
-    lines.append(KERNELS.format(items=", ".join(f"y[{k}]" for k in range(width)),
-                                zitems=", ".join(f"z[{k}]" for k in range(width)),
-                                columns=", ".join(f"Y[{k}, a]" for k in range(width)),
-                                width=width, **BOOKS_CONSTANTS))
+    fill = dict(items=", ".join(f"y[{k}]" for k in range(width)),
+                zitems=", ".join(f"z[{k}]" for k in range(width)),
+                columns=", ".join(f"Y[{k}, a]" for k in range(width)),
+                width=width, **BOOKS_CONSTANTS)
+    lines.append(KERNELS.format(**fill))
+    if guards:
+        lines += [functions_source(guards, names),
+                  SWITCH_KERNEL.format(**fill, **template_items(4 + len(dynamics.extra)))]
     return "\n".join(lines) + "\n", names
 
 
@@ -227,21 +245,24 @@ class Kernel:
         self.y, self.z, self.L, self.O, self.G, self.S = (np.zeros(width) for _ in range(6))
         self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(15)
         self.command, self.lowest = dynamics.command, None
+        self.switched = None      # a switching scene's runs in one mode (switch_run.py)
 
     def run(self, sim, left: int, largest: float):
         """(steps taken, largest |residual|) of Simulator.run without a callback: steps in
         one compiled call while nothing is to be said; the step Python must take (a switching
         scene, a driver, a retaken step, a fault ...) as Simulator.step, its residual
         compiled."""
-        books, done = sim.accuracy, 0
+        books, done, code = sim.accuracy, 0, 1
         if self.plain and not sim.diverged and isinstance(books, accuracy.Accuracy) and \
                 books.stepper is None and books.free.n == books.substeps:
             done, largest, code = self.books_run(sim, books, left, largest)
-            if code == 2:                 # its divergence check is Python's
-                sim._check_divergence()
-                largest = max(largest, abs(self.residual(sim)))
-            if code != 1 or done == left:
-                return done, largest
+        elif self.switched is not None:   # a switching scene's steps in one mode
+            done, largest, code = self.switched.run(self, sim, left, largest)
+        if code == 2:                     # its divergence check is Python's
+            sim._check_divergence()
+            largest = max(largest, abs(self.residual(sim)))
+        if code != 1 or done == left:
+            return done, largest
         sim.step()
         return done + 1, max(largest, abs(self.residual(sim)))
 
@@ -249,10 +270,12 @@ class Kernel:
         self.y[:] = sim.state
         return self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
 
-    def books_run(self, sim, books, left: int, largest: float):
-        """kernels.run_books from the simulator's state and books, and back into them."""
+    def books_run(self, sim, books, left: int, largest: float, run=None, K=None, more=()):
+        """kernels.run_books (or `run`, reading K and `more`) from the simulator's state
+        and books, and back into them."""
         shadow, I, F, n, h = books.shadow, self.I, self.F, books.states, sim.step_size
-        self.K[0], self.K[1] = self.command
+        run, K = run or self.module.run_books, self.K if K is None else K
+        K[0], K[1] = self.command
         self.y[:] = sim.state
         known = shadow.local is not None
         followed = known and not shadow.lost and sim.state is shadow.last
@@ -271,8 +294,8 @@ class Kernel:
                 sim.energy_in_play, books.error_estimate, books.free.previous, books.tolerance,
                 SAFETY * books.target(h), books.target(h), books.factor, self.lowest,
                 float(books.order))
-        done, code, sound = self.module.run_books(self.y, self.z, self.L, self.O, self.G,
-                                                  self.S, I, F, self.K, self.C, left)
+        done, code, sound = run(self.y, self.z, self.L, self.O, self.G, self.S, I, F, K,
+                                self.C, left, *more)
         if not done:
             return 0, largest, code
         sim.state = tuple(self.y.tolist())
@@ -306,7 +329,7 @@ class Steps:
         import numpy as np
         self.dynamics, self.python = dynamics, step
         self.y = np.zeros(4 + len(dynamics.extra) + len(dynamics.channels))
-        self.command, self.compiled = dynamics.command, {}
+        self.command, self.compiled, self.modules = dynamics.command, {}, {}
 
     def __call__(self, f, y, h):
         known = self.compiled.get(f)
@@ -322,9 +345,18 @@ class Steps:
         source = None if f is self.dynamics.function else getattr(f, "source", None)
         if source is None and f is not self.dynamics.function:
             return (lambda y, h, K: self.python(f, tuple(y), h)), [0.0, 0.0]
-        text, names = module_source(self.dynamics, self.python, rhs=source)
+        text, names = module_source(self.dynamics, self.python, rhs=source,
+                                    guards=getattr(f, "guards_source", ""))
         values = {**self.dynamics.function.__globals__, **getattr(self.python, "constants", {})}
-        return load(text).step_array, constants_of(names, values)
+        module, K = load(text), constants_of(names, values)
+        self.modules[f] = module
+        return module.step_array, K
+
+    def module(self, f):
+        """(the compiled module of a mode's rhs f, its K): its step and switching run."""
+        if f not in self.compiled:
+            self.compiled[f] = self.compile(f)
+        return self.modules.get(f), self.compiled[f][1]
 
 
 def compilable(dynamics, step) -> bool:

@@ -170,12 +170,14 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
                              + [f"    return {values}"]) + "\n"
     else:                                        # the switching functions alone: cheap
         source += f"def guard({signature}):\n    return {values}\n"
+    guards_source = source[len(rhs) + 1:]       # probe and guard: compiled.py compiles them
     if requests:
         source += "\n".join([f"def requests({signature}):"] + terms
                              + [f"    return ({', '.join(requests)},)"]) + "\n"
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
     namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
+    namespace["rhs"].guards_source = guards_source if guards else ""
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 
 

@@ -12,6 +12,119 @@ stops and leaves that step to Python (code 1: not taken; code 2: taken, its dive
 check not done).
 """
 
+RUN = '''
+@njit(cache=True)
+def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
+    """DOC"""
+    steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
+    floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
+    order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
+    h, E0, R0, R1, largest, far, in_play = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
+    estimate, previous, tolerance, den, target = F[7], F[8], F[9], F[10], F[11]
+    factor, lowest, orderf = F[12], F[13], F[14]
+    state = ({items},)
+    shade = ({zitems},)
+    done, code, sound = 0, 0, -1
+    while done < left:
+CHECK
+        new_every, wanted = every, n
+        if not check:                         # a plain step, the shadow beside it
+PLAIN
+        else:                                 # a check (accuracy.py)
+CHECKED
+            if known == 1:
+                new_every = scheduled(G, L, every)
+AFTER
+        # the shadow (shadow.Shadow.follow: from the corrected state, less the local error)
+        local_known = known == 1 or check
+        now_lost, now_far, now_shade = lost, far, shade
+        if local_known and lost == 0:
+SHADOW
+            now_shade = corrected(z1, z, G if check else L, states)
+            now_lost, now_far = landed(new, z, far)
+        if check:
+            if now_lost == 1 and said_lost == 0:      # said by the books: Python's
+                code = 1
+                break
+            taken += (n * (steps - since) if n > 1 else 0) + (n if n > 1 else 0)
+            since, estimate, previous = steps + 1, error, kept
+            booked(L, G, states, n, wanted, orderf)
+            n, every, due, known = wanted, new_every, steps + NEXT, 1
+        if local_known and lost == 0:
+            for k in range(states):
+                O[k] = new[k] - z[k]
+            zvalid, shade = 1, now_shade
+        lost, far = now_lost, now_far
+        state = new
+        steps += 1
+        done += 1
+        if steps % {CHECK_EVERY!r} == 0:      # guard.divergence and guard.audit
+            ok, in_play = audited(state, S, C, E0, R0, R1, lowest, in_play, fault)
+            if not ok:
+                code = 2
+                break
+            sound = steps
+        largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
+    handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
+           largest, far, in_play, estimate, previous)
+    return done, code, sound
+'''
+
+
+def run_loop(**parts) -> str:
+    """RUN with its parts (NAME, MORE arguments, DOC, CHECK, PLAIN, CHECKED, AFTER, SHADOW,
+    NEXT) written in: run_books here, run_switching (switch_kernel.py) from the same loop."""
+    text = RUN
+    for marker in ("NAME", "MORE", "DOC", "NEXT"):
+        text = text.replace(marker, parts[marker])
+    for marker in ("CHECK", "PLAIN", "CHECKED", "AFTER", "SHADOW"):
+        text = text.replace(f"\n{marker}\n", "\n" + parts[marker] + "\n" if parts[marker]
+                            else "\n")
+    return text
+
+
+BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
+    NAME='run_books', MORE='', NEXT='new_every', AFTER='',
+    DOC='''Up to `left` steps of Simulator.step from y (in place), the books in I and F (read
+    and written back; compiled.Kernel names them), the shadow's state z, its local error L
+    and offset O; G scratch, S the state the latest divergence check found sound.
+    (steps taken, code: 0 all taken, 1 the next step is Python's, 2 the last step's
+    divergence check is Python's; the step of the latest sound check or -1).''',
+    CHECK='''        check = steps >= due''',
+    PLAIN='''            new = substepped(state, h, n, K)
+            if not finite(new):
+                code = 1
+                break''',
+    CHECKED='''            new = substepped(state, h, n, K)     # the step doubled
+            half = state
+            hs = 0.5 * h / n
+            for k in range(2 * n):
+                half = step(half, hs, K)
+            for k in range(states):
+                G[k] = (new[k] - half[k]) * factor
+            e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
+            scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))),
+                            e3 / (1.0 + abs(new[3])))
+            error = bigger(bigger(bigger(e0, e1), e2), e3)
+            if not (finite(new) and measured(G, states)):
+                code = 1
+                break
+            kept = previous
+            if tolerance != 0.0:
+                wanted, kept = ask(n, scaled / den, previous, order, floor, fcap)
+                if scaled > target and n < cap:           # retaken: Python's
+                    code = 1
+                    break
+                if (wanted >= cap and capped == 0 and scaled > target) or (
+                        wanted > most and wanted > 2 * max(1, most)):   # said: Python's
+                    code = 1
+                    break''',
+    SHADOW='''            if zvalid == 0:
+                for k in range({width}):
+                    z[k] = state[k] - O[k] if k < states else state[k]
+                now_shade = ({zitems},)
+            z1 = substepped(now_shade, h, n, K)''')
+
 KERNELS = '''
 @njit(cache=True)
 def bigger(a, b):
@@ -43,6 +156,15 @@ def finite(state):
 
 
 @njit(cache=True)
+def measured(G, states):
+    """Every state's local error estimate finite."""
+    ok = True
+    for k in range(states):
+        ok = ok and isfinite(G[k])
+    return ok
+
+
+@njit(cache=True)
 def ask(n, ratio, previous, order, floor, cap):
     """controller.Control.ask after a step of n sub-steps measured at `ratio`:
     (the count asked for, the ratio kept)."""
@@ -64,128 +186,80 @@ def ask(n, ratio, previous, order, floor, cap):
 
 
 @njit(cache=True)
-def run_books(y, z, L, O, G, S, I, F, K, C, left):
-    """Up to `left` steps of Simulator.step from y (in place), the books in I and F (read
-    and written back; compiled.Kernel names them), the shadow's state z, its local error L
-    and offset O; G scratch, S the state the latest divergence check found sound.
-    (steps taken, code: 0 all taken, 1 the next step is Python's, 2 the last step's
-    divergence check is Python's; the step of the latest sound check or -1)."""
-    steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
-    floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
-    order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
-    h, E0, R0, R1, largest, far, in_play = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
-    estimate, previous, tolerance, den, target = F[7], F[8], F[9], F[10], F[11]
-    factor, lowest, orderf = F[12], F[13], F[14]
-    state = ({items},)
-    shade = ({zitems},)
-    done, code, sound = 0, 0, -1
-    while done < left:
-        new_every, wanted = every, n
-        if steps < due:                       # a plain step, the shadow beside it
-            new = substepped(state, h, n, K)
-            if not finite(new):
-                code = 1
-                break
-        else:                                 # a check: the step doubled (accuracy.py)
-            new = substepped(state, h, n, K)
-            half = state
-            hs = 0.5 * h / n
-            for k in range(2 * n):
-                half = step(half, hs, K)
-            for k in range(states):
-                G[k] = (new[k] - half[k]) * factor
-            e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
-            scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))),
-                            e3 / (1.0 + abs(new[3])))
-            error = bigger(bigger(bigger(e0, e1), e2), e3)
-            ok = finite(new)
-            for k in range(states):
-                ok = ok and isfinite(G[k])
-            if not ok:
-                code = 1
-                break
-            kept = previous
-            if tolerance != 0.0:
-                wanted, kept = ask(n, scaled / den, previous, order, floor, fcap)
-                if scaled > target and n < cap:           # retaken: Python's
-                    code = 1
-                    break
-                if (wanted >= cap and capped == 0 and scaled > target) or (
-                        wanted > most and wanted > 2 * max(1, most)):   # said: Python's
-                    code = 1
-                    break
-            if known == 1:                    # shadow.next_every
-                change, size = 0.0, 0.0
-                for k in range(4):
-                    change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
-                for k in range(4):
-                    size = bigger(size, abs(G[k])) if k else abs(G[k])
-                for k in range(4):
-                    size = bigger(size, abs(L[k]))
-                if change > {ROUGH!r} * size:
-                    new_every = max({MIN_EVERY!r}, every // 2)
-                elif change < {SMOOTH!r} * size:
-                    new_every = min({MAX_EVERY!r}, 2 * every)
-        # the shadow (shadow.Shadow.follow: from the corrected state, less the local error)
-        local_known = known == 1 or steps >= due
-        now_lost, now_far, now_shade = lost, far, shade
-        if local_known and lost == 0:
-            if zvalid == 0:
-                for k in range({width}):
-                    z[k] = state[k] - O[k] if k < states else state[k]
-                now_shade = ({zitems},)
-            z1 = substepped(now_shade, h, n, K)
-            for k in range({width}):
-                z[k] = z1[k] - (G[k] if steps >= due else L[k]) if k < states else z1[k]
-            now_shade = ({zitems},)
-            o0, o1, o2, o3 = new[0] - z[0], new[1] - z[1], new[2] - z[2], new[3] - z[3]
-            distance = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2)), abs(o3))
-            scaled_off = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2) / (1.0 + abs(new[2]))),
-                                abs(o3) / (1.0 + abs(new[3])))
-            if not scaled_off <= {LOST!r}:
-                now_lost, distance = 1, bigger(far, {LOST!r})
-            now_far = bigger(far, distance)
-        if steps >= due:
-            if now_lost == 1 and said_lost == 0:      # said by the books: Python's
-                code = 1
-                break
-            taken += (n * (steps - since) if n > 1 else 0) + (n if n > 1 else 0)
-            since, estimate, previous = steps + 1, error, kept
-            scale = (n / wanted) ** orderf if wanted != n else 1.0
-            for k in range(states):
-                L[k] = G[k] * scale if wanted != n else G[k]
-            n, every, due, known = wanted, new_every, steps + new_every, 1
-        if local_known and lost == 0:
-            for k in range(states):
-                O[k] = new[k] - z[k]
-            zvalid, shade = 1, now_shade
-        lost, far = now_lost, now_far
-        state = new
-        steps += 1
-        done += 1
-        if steps % {CHECK_EVERY!r} == 0:      # guard.divergence and guard.audit
-            r = residual(state, C, E0, R0, R1)
-            expected = E0 - lowest + abs(inputs(state, R0))
-            if not abs(r) <= {FLOOR!r} + bigger(in_play, expected) or not bigger(
-                    abs(state[0]), abs(state[1])) <= {MAX_ANGLE!r}:
-                code = 2
-                break
-            play = bigger(in_play, energy(state, C) - lowest)
-            if fault == 0 and not abs(r) <= {BOOKS_FRACTION!r} * ({FLOOR!r} + bigger(
-                    play, expected)):
-                code = 2
-                break
-            in_play, sound = play, steps
-            for k in range({width}):
-                S[k] = state[k]
-        largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
+def scheduled(G, L, every):
+    """shadow.next_every: steps to the next check after one that measured G (L predicted)."""
+    change, size = 0.0, 0.0
+    for k in range(4):
+        change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
+    for k in range(4):
+        size = bigger(size, abs(G[k])) if k else abs(G[k])
+    for k in range(4):
+        size = bigger(size, abs(L[k]))
+    if change > {ROUGH!r} * size:
+        return max({MIN_EVERY!r}, every // 2)
+    if change < {SMOOTH!r} * size:
+        return min({MAX_EVERY!r}, 2 * every)
+    return every
+
+
+@njit(cache=True)
+def corrected(z1, z, local, states):
+    """The shadow's step z1 less the local error (Shadow.land), into z and returned."""
+    for k in range({width}):
+        z[k] = z1[k] - local[k] if k < states else z1[k]
+    return ({zitems},)
+
+
+@njit(cache=True)
+def landed(new, z, far):
+    """Shadow.land beside the motion's new state: (lost, the largest distance so far)."""
+    o0, o1, o2, o3 = new[0] - z[0], new[1] - z[1], new[2] - z[2], new[3] - z[3]
+    distance = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2)), abs(o3))
+    scaled_off = bigger(bigger(bigger(abs(o0), abs(o1)), abs(o2) / (1.0 + abs(new[2]))),
+                        abs(o3) / (1.0 + abs(new[3])))
+    lost = 0
+    if not scaled_off <= {LOST!r}:
+        lost, distance = 1, bigger(far, {LOST!r})
+    return lost, bigger(far, distance)
+
+
+@njit(cache=True)
+def booked(L, G, states, n, wanted, orderf):
+    """The shadow's local error from now on: the check's G, predicted at the new count."""
+    scale = (n / wanted) ** orderf if wanted != n else 1.0
+    for k in range(states):
+        L[k] = G[k] * scale if wanted != n else G[k]
+
+
+@njit(cache=True)
+def handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
+           largest, far, in_play, estimate, previous):
+    """The run's state, shadow and books written back for Python (compiled.Kernel)."""
     for k in range({width}):
         y[k], z[k] = state[k], shade[k]
     I[0], I[1], I[2], I[3], I[4], I[5] = steps, due, since, taken, n, every
     I[13], I[14], I[15] = known, zvalid, lost
     F[4], F[5], F[6], F[7], F[8] = largest, far, in_play, estimate, previous
-    return done, code, sound
 
+
+@njit(cache=True)
+def audited(state, S, C, E0, R0, R1, lowest, in_play, fault):
+    """guard.divergence and guard.audit: (sound and the books close, the energy in play),
+    the sound state kept in S; False: Python's to say."""
+    r = residual(state, C, E0, R0, R1)
+    expected = E0 - lowest + abs(inputs(state, R0))
+    if not abs(r) <= {FLOOR!r} + bigger(in_play, expected) or not bigger(
+            abs(state[0]), abs(state[1])) <= {MAX_ANGLE!r}:
+        return False, in_play
+    play = bigger(in_play, energy(state, C) - lowest)
+    if fault == 0 and not abs(r) <= {BOOKS_FRACTION!r} * ({FLOOR!r} + bigger(play, expected)):
+        return False, in_play
+    for k in range({width}):
+        S[k] = state[k]
+    return True, play
+
+
+''' + run_loop(**BOOKS_PARTS) + '''
 
 @njit(cache=True)
 def step_array(y, h, K):

@@ -22,6 +22,7 @@ from .dynamics import build_dynamics
 from .effects import servo
 from .integrators import INTEGRATORS, step_for
 from .scene import Scene
+from .switch_run import Switched
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 
@@ -281,6 +282,8 @@ def steppers(sim: Simulator, scene: Scene) -> None:
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
     sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
+    if sim.kernel is not None and sim.switching is not None and hasattr(step, "module"):
+        sim.kernel.switched = Switched(step, sim._driver is not None)   # switch_run.py
     sim.path = getattr(step, "path", "python")
     sim.sampled = servo.sampled(sim.dynamics)    # a discrete servo (its rate), or None
     if sim.sampled is not None and (risk := servo.sampling_risk(sim.sampled, sim.arm)):
