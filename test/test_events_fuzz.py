@@ -13,12 +13,12 @@ random scenes hypothesis draws, and the cases that broke them before:
 import os
 
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, reject, settings, strategies as st
 
 from arm_sim_ros.physics import guard
 from arm_sim_ros.physics.scene import Scene
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.tools.independent import Independent, covers
+from arm_sim_ros.tools.independent import Independent, Undecided, covers
 
 EXAMPLES = int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 25))  # more by hand: a longer hunt
 FUZZ = settings(max_examples=EXAMPLES, deadline=None,
@@ -146,7 +146,10 @@ def friction_scenes(draw):
 def test_every_stop_large_coulomb_friction_makes_is_located_as_the_reference_has_it(scene):
     assert covers(scene) is None
     reference = Independent(scene)
-    expected = reference.states([0.0, 0.2])[-1]
+    try:
+        expected = reference.states([0.0, 0.2])[-1]
+    except Undecided:       # a joint slipping at Stribeck's peak and stopping at once: the
+        reject()            # reference's modes have no motion to compare (it hung before)
     sim = Simulator(scene)
     sim.run(0.2)
     assert sum(sim.switch_events.values()) == len(reference.switch_times)

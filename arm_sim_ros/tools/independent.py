@@ -18,6 +18,12 @@ from scipy.integrate import solve_ivp
 
 TOLERANCE = 1e-12
 REST_SPEED = 1e-4          # a bounce slower than this ends at rest (the documented rule)
+SAME_INSTANT = 64          # switches at one instant past which this reference cannot decide
+
+
+class Undecided(Exception):
+    """The reference switches without end at one instant (a joint that slips at Stribeck's
+    peak and stops at once, again and again): it cannot say what the motion is."""
 COVERED_POLICIES = ("zero", "constant", "gravity_compensation")
 
 
@@ -253,6 +259,9 @@ class Independent:
             which = next(n for n, ts in enumerate(sol.t_events) if len(ts) and ts[0] == stop)
             t, x = stop, sol.y_events[which][0].copy()
             self.switch_times.append(t)
+            if self.switch_times[-SAME_INSTANT:] == [t] * SAME_INSTANT:
+                raise Undecided(f"{SAME_INSTANT} switches at t = {t!r} s ({events[which][1]} "
+                                f"of joint {events[which][2] + 1}): no reference motion")
             mode, zone = list(mode), list(zone)
             mode = self.switch(events[which][1], events[which][2], x, mode, zone)
         return out
