@@ -54,9 +54,9 @@ def refusal(control, steps: int, busy: bool) -> tuple | None:
     return None
 
 
-def waiting(stamp_ns: int, now_ns: int, done: int, listening: bool) -> bool:
+def waiting(stamp_ns: int, now_ns: int, listening: bool) -> bool:
     """The goal accepted at `stamp_ns` holds its first tick: nobody reads its feedback yet."""
-    return not done and not listening and now_ns - stamp_ns < FEEDBACK_WAIT * 1e9
+    return not listening and now_ns - stamp_ns < FEEDBACK_WAIT * 1e9
 
 
 def canceled(done: int, steps: int) -> str:
@@ -101,8 +101,8 @@ class StepsGoals:
         goal = self.active()
         if goal is None:
             return None
-        if goal.status == STATUS_EXECUTING and waiting(goal.stamp_ns, self.clock_ns(),
-                                                       goal.completed, listening):
+        if goal.status == STATUS_EXECUTING and not goal.completed and waiting(
+                goal.stamp_ns, self.clock_ns(), listening):
             return None
         if goal.status == STATUS_CANCELING:
             self._finish(goal, STATUS_CANCELED, RESULT_OK, canceled(goal.completed, goal.steps))

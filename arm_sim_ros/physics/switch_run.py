@@ -12,6 +12,8 @@ run goes on.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from . import accuracy
 from .events import STEEP
 
@@ -24,7 +26,6 @@ class Switched:
         return self
 
     def __init__(self, steps, driven: bool):
-        import numpy as np
         self.steps, self.driven = steps, driven
         self.X, self.E = np.zeros(4), np.zeros(8)
 

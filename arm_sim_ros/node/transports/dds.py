@@ -180,8 +180,12 @@ class DdsArmSimNode:
             now = self.wall_clock()
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
-                if not self.take_commands(timeout=LOCKSTEP_WAIT) and self.tick(now) is None:
-                    self._publish_clock()              # the time, while nobody commands
+                if not self.take_commands(timeout=LOCKSTEP_WAIT):
+                    data = self.core.tick(now)         # lockstep_wait: a tick of its own
+                    if data is None:
+                        self._publish_clock()          # the time, while nobody commands
+                    else:
+                        self._publish(data)
             elif schedule.wait(now) > 0:
                 # sleep, serving, in slices: a signal is handled and a new period (a
                 # parameter set) is taken up within SERVE_SLICE

@@ -78,7 +78,7 @@ def executor(control, action, result_type, listening):
             running.append(goal_handle)
             try:
                 accepted = time.monotonic_ns()
-                while waiting(accepted, time.monotonic_ns(), done, listening()) and \
+                while waiting(accepted, time.monotonic_ns(), listening()) and \
                         not goal_handle.is_cancel_requested:
                     await Turn()
                 while done < steps and not goal_handle.is_cancel_requested:
