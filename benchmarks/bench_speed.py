@@ -13,6 +13,10 @@ Columns (µs per simulated second, and steps per second):
              it models the same physics: no soft friction or limits, no controller model)
   limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
              no accuracy checks, no residual, no switching: friction's mode-free form)
+  sub/step   the RK4 sub-steps the run takes per step: the plan's, and the tolerance's where
+             it splits steps to meet it (release: where the elbow whips)
+  of same    compiled against the limit taking as many sub-steps: what the error books,
+             the energy books and the switches cost beyond the steps themselves
 Each keeps the fastest of --repeat runs of --seconds simulated seconds after one warm-up run
 (`first`: that run, compiling what it meets or loading it from the cache).
 
@@ -70,6 +74,19 @@ def time_run(scene, seconds: float, repeat: int, fast: bool):
     return fastest(run, repeat), sim.path, first
 
 
+def substeps_per_step(scene, seconds: float) -> float:
+    """The RK4 sub-steps the run's motion takes per step (the tolerance's included), counted
+    on the Python path step by step (the compiled path takes the same)."""
+    sim, split = simulator(scene, False), []
+    before = [0]
+
+    def count(s):
+        split.append(s.substeps_taken > before[0])
+        before[0] = s.substeps_taken
+    sim.run(seconds, count)
+    return (sim.substeps_taken + split.count(False)) / max(1, sim.steps)
+
+
 def time_limit(scene, seconds: float, repeat: int):
     """The bare compiled RK4 loop on the scene's rhs (compiled.bare: steps, nothing else)."""
     sim = simulator(scene, False)
@@ -108,7 +125,8 @@ def time_mujoco(scene, seconds: float, repeat: int):
 
 def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
     head = (f"{'preset':<30}{'h':>7}{'sub':>4} {'python':>9} {'compiled':>9} {'mujoco':>9} "
-            f"{'limit':>8} {'speed-up':>8} {'of limit':>8}  path / first compile")
+            f"{'limit':>8} {'speed-up':>8} {'of limit':>8} {'sub/step':>8} {'of same':>8}  "
+            "path / first compile")
     lines = [f"µs per simulated second (steps/s below each), {seconds:g} s runs, best of {repeat}",
              head, "-" * len(head)]
     for name in only or preset_names():
@@ -122,8 +140,11 @@ def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
         rate = lambda t: f"{steps / t:>9.3g}" if t is not None else f"{'':>9}"
         sub = Simulator(scene).substeps
         ratio = lambda a, b: f"{a / b:>7.1f}x" if b else f"{'-':>8}"
+        taken = substeps_per_step(scene, seconds)     # the limit at the run's own count
+        same = limit * taken / sub if limit else None
         lines.append(f"{name:<30}{scene.step_size:>7g}{sub:>4} {per(py)} {per(fast)} {per(theirs)}"
-                     f"{per(limit)[1:]} {py / fast:>7.1f}x {ratio(fast, limit)}  "
+                     f"{per(limit)[1:]} {py / fast:>7.1f}x {ratio(fast, limit)} {taken:>8.2f} "
+                     f"{ratio(fast, same)}  "
                      f"{'compiled' if 'numba' in path else 'python'} {first:.2f} s {why}")
         lines.append(f"{'':<41} {rate(py)} {rate(fast)} {rate(theirs)}{rate(limit)[1:]}")
     return lines

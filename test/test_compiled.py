@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from arm_sim_ros.physics import compiled
+from arm_sim_ros.physics import accuracy, compiled, controller
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -75,13 +75,29 @@ def test_the_compiled_run_leaves_the_books_as_python_leaves_them(name, monkeypat
 
 def test_a_smooth_run_is_one_compiled_call_until_something_is_to_be_said(monkeypatch):
     """The checks and the divergence checks are in the compiled loop: Python takes no step
-    of a run where nothing is retaken, raised or refused."""
+    of a run where nothing is said (a new highest count, a fault)."""
     sim = Simulator(load_scene("moving_gravity_compensation"))
     taken = []
     monkeypatch.setattr(sim, "step", lambda: taken.append(sim.steps))
     sim.run(3.0)
     assert taken == [] and sim.steps == 300 and sim.confirmed
     assert not [e for e in sim.events if e.kind in ("substepping", "accuracy", "fault")]
+
+
+def test_a_step_that_misses_the_tolerance_is_taken_again_in_the_compiled_loop(monkeypatch):
+    """release at tolerance 1e-6: steps where the elbow whips miss it and are taken again
+    with more sub-steps, inside the compiled loop; Python takes only the steps that say a
+    new highest count."""
+    retaken = []
+    monkeypatch.setattr(accuracy, "retake", lambda *a: retaken.append(a) or controller.retake(*a))
+    python, fast = python_and_compiled(load_scene("release").replace(tolerance=1e-6),
+                                       monkeypatch)
+    handed, step = [], fast.step
+    monkeypatch.setattr(fast, "step", lambda: handed.append(fast.steps) or step())
+    assert python.run(4.0) == fast.run(4.0)
+    assert books(python) == books(fast)
+    said = [e for e in fast.events if e.kind == "substepping"]
+    assert len(retaken) >= 5 and 0 < len(handed) <= len(said) < len(retaken)
 
 
 def test_a_payload_grasped_between_runs_goes_on_from_the_same_books(monkeypatch):

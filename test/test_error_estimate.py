@@ -25,6 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE, LOST
+from arm_sim_ros.physics.shadow import MAX_EVERY
 from arm_sim_ros.physics.scene import Scene, load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.tools.independent import Independent, covers
@@ -189,6 +190,20 @@ def test_where_plain_steps_meet_the_default_tolerance_they_stay_plain(name, h, d
         runs.append(states)
         assert sim.substeps_taken == 0
     assert runs[0] == runs[1]
+
+
+@pytest.mark.parametrize("name, steps", [("gravity_compensation_at_rest", 200),
+                                         ("downward_equilibrium", 200),
+                                         ("motor_windings_hold", 2000)])
+def test_where_the_local_error_is_rounding_checks_come_every_max_every_steps(name, steps):
+    """A check costs two steps' evaluations. Rounding moves as fast as its size, so it is
+    measured against ROUNDING: an arm held at rest (the windings' hold once its current has
+    settled) is checked every MAX_EVERY steps, not every MIN_EVERY (the estimate stays
+    honest: the factor-of-10 rule above)."""
+    sim = Simulator(load_scene(name))
+    checks = set()          # each check moves `since` to the step after it
+    sim.run(steps * sim.step_size, lambda s: checks.add(s.accuracy.since))
+    assert len(checks) <= 2 * steps // MAX_EVERY + 5 and sim.accuracy.every == MAX_EVERY
 
 
 def test_the_default_tolerance_splits_release_where_the_elbow_whips():

@@ -70,8 +70,9 @@ STORED["joint_limits"] = _limit_energy
 BOOKS_CONSTANTS = {**{n: getattr(controller, n) for n in ("KI", "KP", "KEEP", "SAFETY",
                                                           "MAX_GROWTH", "MAX_SHRINK")},
                    **{n: getattr(shadow, n) for n in ("ROUGH", "SMOOTH", "MIN_EVERY",
-                                                      "MAX_EVERY", "LOST")},
+                                                      "MAX_EVERY", "LOST", "ROUNDING")},
                    **{n: getattr(guard, n) for n in ("CHECK_EVERY", "FLOOR", "BOOKS_FRACTION")},
+                   "GIVE_UP": accuracy.GIVE_UP, "NO_GAIN": accuracy.NO_GAIN,
                    "MAX_ANGLE": MAX_INITIAL_ANGLE}
 STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
 

@@ -4,12 +4,12 @@ the state's entries and the books' constants and compiles them with numba.
 
 run_books does what Simulator.step does on a smooth scene, step after step, with the same
 operations in the same order: the planned sub-steps, the shadow beside them (shadow.py),
-the accuracy books' checks on their schedule (accuracy.py: the step doubled, the
-controller's count, the next check) and the divergence check every CHECK_EVERY steps
-(guard.py). Python's max(a, b) keeps a unless b > a: so does `bigger`. Where Python would
-say something (a retaken step, a new count, a lost estimate, a fault, a divergence) it
-stops and leaves that step to Python (code 1: not taken; code 2: taken, its divergence
-check not done).
+the accuracy books' checks on their schedule (accuracy.py: the step doubled, a miss of the
+tolerance taken again, the controller's count, the next check), the divergence check every
+CHECK_EVERY steps and at the run's end (guard.py). Python's max(a, b) keeps a unless b > a:
+so does `bigger`. Where Python would say something (a new highest count, a tolerance out
+of reach, a lost estimate, a fault, a divergence) it stops and leaves that step to Python
+(code 1: not taken; code 2: taken, its divergence check not done).
 """
 
 RUN = '''
@@ -27,7 +27,7 @@ def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
     done, code, sound = 0, 0, -1
     while done < left:
 CHECK
-        new_every, wanted = every, n
+        new_every, wanted, count = every, n, n     # count: this step's sub-steps
         if not check:                         # a plain step, the shadow beside it
 PLAIN
         else:                                 # a check (accuracy.py)
@@ -46,9 +46,9 @@ SHADOW
             if now_lost == 1 and said_lost == 0:      # said by the books: Python's
                 code = 1
                 break
-            taken += (n * (steps - since) if n > 1 else 0) + (n if n > 1 else 0)
+            taken += (n * (steps - since) if n > 1 else 0) + (count if count > 1 else 0)
             since, estimate, previous = steps + 1, error, kept
-            booked(L, G, states, n, wanted, orderf)
+            booked(L, G, states, count, wanted, orderf)
             n, every, due, known = wanted, new_every, steps + NEXT, 1
         if local_known and lost == 0:
             for k in range(states):
@@ -65,6 +65,12 @@ SHADOW
                 break
             sound = steps
         largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
+    if code == 0 and done == left and steps % {CHECK_EVERY!r} != 0:
+        ok, in_play = audited(state, S, C, E0, R0, R1, lowest, in_play, fault)
+        if ok:                                # Simulator.run's check at its end
+            sound = steps
+        else:
+            code = 2
     handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
            largest, far, in_play, estimate, previous)
     return done, code, sound
@@ -95,25 +101,23 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
             if not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new = substepped(state, h, n, K)     # the step doubled
-            half = state
-            hs = 0.5 * h / n
-            for k in range(2 * n):
-                half = step(half, hs, K)
-            for k in range(states):
-                G[k] = (new[k] - half[k]) * factor
-            e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
-            scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))),
-                            e3 / (1.0 + abs(new[3])))
-            error = bigger(bigger(bigger(e0, e1), e2), e3)
+    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states)
             if not (finite(new) and measured(G, states)):
                 code = 1
                 break
             kept = previous
             if tolerance != 0.0:
                 wanted, kept = ask(n, scaled / den, previous, order, floor, fcap)
-                if scaled > target and n < cap:           # retaken: Python's
-                    code = 1
+                first = scaled
+                while scaled > target and count < cap:    # a miss: taken again
+                    count = retake(count, scaled / den, order, cap)
+                    new, error, scaled = doubled(state, h, count, K, G, factor, states)
+                    if not (finite(new) and measured(G, states)) or (
+                            count >= {GIVE_UP!r} * n and scaled > {NO_GAIN!r} * first):
+                        code = 1                          # said: Python's
+                        break
+                    wanted, kept = ask(count, scaled / den, kept, order, floor, fcap)
+                if code == 1:
                     break
                 if (wanted >= cap and capped == 0 and scaled > target) or (
                         wanted > most and wanted > 2 * max(1, most)):   # said: Python's
@@ -123,7 +127,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 for k in range({width}):
                     z[k] = state[k] - O[k] if k < states else state[k]
                 now_shade = ({zitems},)
-            z1 = substepped(now_shade, h, n, K)''')
+            z1 = substepped(now_shade, h, count, K)''')
 
 KERNELS = '''
 @njit(cache=True)
@@ -145,6 +149,32 @@ def substepped(state, h, n, K):
     for k in range(n):
         state = step(state, dt, K)
     return state
+
+
+@njit(cache=True)
+def doubled(state, h, n, K, G, factor, states):
+    """accuracy.Accuracy.measure: (the step as n sub-steps, its local error, its scaled
+    error), the signed local error of every state in G (Richardson: 2n half sub-steps)."""
+    new = substepped(state, h, n, K)
+    half = state
+    hs = 0.5 * h / n
+    for k in range(2 * n):
+        half = step(half, hs, K)
+    for k in range(states):
+        G[k] = (new[k] - half[k]) * factor
+    e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
+    scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
+    return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
+
+
+@njit(cache=True)
+def retake(n, ratio, order, cap):
+    """controller.retake: the count a step that missed the tolerance is taken again at."""
+    if isfinite(ratio):
+        wanted = n * smaller({MAX_SHRINK!r}, ratio ** (1.0 / order))
+    else:
+        wanted = n * {MAX_SHRINK!r}
+    return min(cap, max(n + 1, ceil(wanted - 1e-9)))
 
 
 @njit(cache=True)
@@ -188,11 +218,11 @@ def ask(n, ratio, previous, order, floor, cap):
 @njit(cache=True)
 def scheduled(G, L, every):
     """shadow.next_every: steps to the next check after one that measured G (L predicted)."""
-    change, size = 0.0, 0.0
+    change, size = 0.0, {ROUNDING!r}
     for k in range(4):
         change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
     for k in range(4):
-        size = bigger(size, abs(G[k])) if k else abs(G[k])
+        size = bigger(size, abs(G[k]))
     for k in range(4):
         size = bigger(size, abs(L[k]))
     if change > {ROUGH!r} * size:

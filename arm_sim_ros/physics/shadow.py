@@ -8,15 +8,18 @@ MIN_EVERY, MAX_EVERY = 2, 32   # then as often as the local
 ROUGH, SMOOTH = 0.5, 0.125     # error moves: twice as often past ROUGH x its size, half
                                # as often under SMOOTH x its size
 LOST = 1.0                # rad (velocities scaled): a global error beyond this has lost the motion
+ROUNDING = 1e-13          # a local error under this is rounding (doubles): how it moves says nothing
 
 
 def next_every(every: int, predicted, measured) -> int:
     """Steps to the next check: the shadow carries each check's local error to the steps
     after it, which is right while that error moves slowly; where it moves as fast as its
-    size (an elbow whipping, a joint about to stick) checks come more often."""
+    size (an elbow whipping, a joint about to stick) checks come more often. Rounding
+    moves as fast as its size: a local error at rounding is measured against ROUNDING (at
+    rest checks grow as rare as MAX_EVERY)."""
     if predicted is not None:
         change = max(abs(a - b) for a, b in zip(measured[:4], predicted[:4]))
-        size = max(*(abs(a) for a in measured[:4]), *(abs(b) for b in predicted[:4]))
+        size = max(ROUNDING, *(abs(a) for a in measured[:4]), *(abs(b) for b in predicted[:4]))
         if change > ROUGH * size:
             return max(MIN_EVERY, every // 2)
         if change < SMOOTH * size:
