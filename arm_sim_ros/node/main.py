@@ -50,7 +50,20 @@ class _RosFormatter(logging.Formatter):
         return f"[{level}] [{record.created:.9f}] [{record.name}]: {record.getMessage()}"
 
 
-def run_dds(ros_argv: list, duration: float | None, status) -> int:
+class Stop:
+    """SIGINT and SIGTERM: KeyboardInterrupt where Python is, and remembered, because one
+    raised inside a C library's callback into Python is printed and dropped there (llvmlite's,
+    while numba compiles a scene's code at the first tick: the node ran on). The dds loop
+    reads `requested` every pass."""
+
+    requested = False
+
+    def __call__(self, number, frame):
+        self.requested = True
+        raise KeyboardInterrupt
+
+
+def run_dds(ros_argv: list, duration: float | None, status, stop=None) -> int:
     from .messages import close_domains
     from .transports.dds import DdsArmSimNode
 
@@ -60,7 +73,7 @@ def run_dds(ros_argv: list, duration: float | None, status) -> int:
     node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name, namespace=namespace,
                          remap=rules)   # a DiscoveryError is a UsageError: one line, exit 2
     try:
-        node.spin(duration, status)
+        node.spin(duration, status, stopped=stop and (lambda: stop.requested))
     finally:
         node.close()
         close_domains()      # Cyclone torn down now, in order, not by interpreter teardown
@@ -112,8 +125,9 @@ def main(argv=None) -> int:
     # launch stops nodes with SIGINT, then SIGTERM: both end the loop the same clean way.
     # SIGINT too, explicitly: Python leaves it ignored when the parent started us with it
     # ignored (`nohup`, `cmd &` in a script), and then Ctrl-C could never stop the node.
+    stop = Stop()
     for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, signal.default_int_handler)
+        signal.signal(number, stop)
     try:
         args = build_parser().parse_args(ours)
         if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:
@@ -124,7 +138,7 @@ def main(argv=None) -> int:
         if transport == "rclpy":
             from .transports.rclpy_transport import run
             return run(["arm_sim_node", "--ros-args", *ros_argv], args.duration, status)
-        return run_dds(ros_argv, args.duration, status)
+        return run_dds(ros_argv, args.duration, status, stop)
     except (UsageError, ParameterRefused, transports.TransportUnavailable) as error:
         print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
         return 2

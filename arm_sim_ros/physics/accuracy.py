@@ -8,7 +8,8 @@ is the step's local error at its end, signed, for every state (p = the tableau's
 At the end, not as n x the first sub-step: a stiff mode the stability plan's sub-steps
 damp out within the step has decayed by then. An embedded pair (dopri5) is measured
 against its own step at 1/TIGHTER of its tolerances. Checks come every MIN_EVERY steps
-at first, then as often as the local error moves (shadow.py: up to every MAX_EVERY).
+at first, then as often as the local error moves (shadow.py: up to every MAX_EVERY; at
+rounding, under ROUNDING, it is measured against ROUNDING: at rest, every MAX_EVERY).
 Switching scenes (events.py): every step in which a switch is located, and every step
 with a compliant limit engaged, is checked, each smooth piece up to a switch doubled.
 

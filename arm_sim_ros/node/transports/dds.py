@@ -167,16 +167,19 @@ class DdsArmSimNode:
 
     # the loop ------------------------------------------------------------------------------
 
-    def spin(self, duration_s: float | None = None, on_status=None) -> None:
+    def spin(self, duration_s: float | None = None, on_status=None, stopped=None) -> None:
         """Tick at publish_rate x real_time_factor (as fast as possible when 0) until the
         simulated time since start reaches `duration_s`, or forever: whatever publish_rate,
         step_size or lockstep become meanwhile, and across resets. Once a wall second:
         diagnostics and `on_status(line)`. Late ticks are made up as schedule.py says. Every
-        tick is exactly steps_per_tick steps."""
+        tick is exactly steps_per_tick steps. `stopped()` true: KeyboardInterrupt (a signal
+        whose own was dropped, main.Stop)."""
         end_ns = None if duration_s is None else round(duration_s * 1e9)
         schedule = TickSchedule(self.wall_clock())
         next_status = schedule.next_tick + 1.0
         while end_ns is None or self.core.stamp_ns() - self.core.start_stamp_ns < end_ns:
+            if stopped is not None and stopped():
+                raise KeyboardInterrupt
             now = self.wall_clock()
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
