@@ -206,6 +206,28 @@ def test_where_the_local_error_is_rounding_checks_come_every_max_every_steps(nam
     assert len(checks) <= 2 * steps // MAX_EVERY + 5 and sim.accuracy.every == MAX_EVERY
 
 
+def test_a_new_command_is_checked_at_the_next_step():
+    """An arm at rest is checked every MAX_EVERY steps; a command (the node's torque topic)
+    moves the local error at once, so the step after it is checked, and the estimate of
+    the motion it starts is honest (against the same steps at h/16, tolerance 1e-11)."""
+    scene = load_scene("gravity_compensation_at_rest").replace(
+        policy="command_gravity_compensation")
+    runs = []
+    for at in (scene, scene.replace(step_size=scene.step_size / FINE, tolerance=1e-11,
+                                    max_substeps=20000)):
+        sim, states, checks = Simulator(at), [], set()
+        sim.run(1.0)
+        assert sim.accuracy.every == MAX_EVERY
+        sim.set_command(6.0, -3.0)
+        sim.run(0.5, lambda s: (states.append(s.state[:4]), checks.add(s.accuracy.since)))
+        runs.append((sim, states, checks))
+    (sim, states, checks), (_, fine, _) = runs
+    assert sim.steps + 1 - len(states) in checks          # the step after the command
+    true = max(max(abs(a - b) for a, b in zip(state, fine[FINE * (i + 1) - 1]))
+               for i, state in enumerate(states))
+    assert 0.1 <= sim.accumulated_error / true <= 10.0, (sim.accumulated_error, true)
+
+
 def test_the_default_tolerance_splits_release_where_the_elbow_whips():
     """Plain RK4 at 10 ms makes up to ~1e-3 rad per s there, 20x the default tolerance:
     the steps are split where it does and given back after."""

@@ -101,8 +101,7 @@ class ArmSimCore(CommandInput):
     def _set_command(self, tau1: float, tau2: float, setpoints=None) -> None:
         """Hold a new command; the steps taken under the old one reach the recorder first."""
         self.recorder.hand_over()
-        self.sim.set_command(tau1, tau2)
-        servo.set_points(self.sim.dynamics, setpoints or {})
+        self.sim.set_command(tau1, tau2, setpoints)
 
     def _change_physics(self, config: NodeConfig, names: list) -> None:
         """Live effects changed: the new physics from the next step, state and books carried

@@ -129,10 +129,10 @@ class Simulator:
     def time(self) -> float:
         return self.steps * self.step_size
 
-    def set_command(self, tau1: float, tau2: float) -> None:
-        """The torque held by the `command` policies until the next call."""
-        self.dynamics.command[0] = tau1
-        self.dynamics.command[1] = tau2
+    def set_command(self, tau1: float, tau2: float, setpoints=None) -> None:
+        """The torque the `command` policies hold, and a servo's set-points, until the next
+        call (set_command below)."""
+        set_command(self, tau1, tau2, setpoints)
 
     def set_payload(self, mass: float) -> None:
         """Grasp (M(q) q̇ kept: an inelastic grasp of a mass at rest) or release (q̇ kept) a
@@ -273,6 +273,24 @@ class Simulator:
         if steps and not self.holding and not self.confirmed:
             self._check_divergence()          # a short run must not end on nonsense either
         return largest
+
+
+def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> None:
+    """Simulator.set_command, servo `setpoints` {(field, joint): value}. A new command moves
+    the local error at once: the next step is checked (accuracy.py), not the one the
+    schedule had come to."""
+    before = commanded(sim)
+    sim.dynamics.command[0] = tau1
+    sim.dynamics.command[1] = tau2
+    servo.set_points(sim.dynamics, setpoints or {})
+    if commanded(sim) != before:
+        sim.accuracy.due = min(sim.accuracy.due, sim.steps)
+
+
+def commanded(sim: Simulator) -> tuple:
+    """The command and a servo's set-points, as the step reads them."""
+    joint_servo = servo.servo_of(sim.dynamics)
+    return (*sim.dynamics.command, *(joint_servo.setpoint if joint_servo is not None else ()))
 
 
 def steppers(sim: Simulator, scene: Scene) -> None:
