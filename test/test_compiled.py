@@ -3,9 +3,11 @@ bit for bit: states, energy books, error books, the largest residual. Skipped wi
 """
 import hashlib
 import math
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from arm_sim_ros.physics import accuracy, compiled, controller
 from arm_sim_ros.physics.scene import load_scene, preset_names
@@ -98,6 +100,39 @@ def test_a_step_that_misses_the_tolerance_is_taken_again_in_the_compiled_loop(mo
     assert books(python) == books(fast)
     said = [e for e in fast.events if e.kind == "substepping"]
     assert len(retaken) >= 5 and 0 < len(handed) <= len(said) < len(retaken)
+
+
+SMOOTH = ("release", "damped_release", "springs_oscillation", "payload_release",
+          "moving_frozen_gravity", "motor_windings_hold")
+
+
+@st.composite
+def smooth_runs(draw):
+    """A smooth preset from a random state at a random tolerance (steps missed and taken
+    again, counts raised and lowered), a new command before each run."""
+    scene = load_scene(draw(st.sampled_from(SMOOTH)))
+    speed = 1.0 if scene.step_size < 0.005 else 6.0
+    scene = scene.replace(
+        policy="command_gravity_compensation",
+        initial_positions=tuple(draw(st.floats(-1.5, 1.5)) for _ in (0, 1)),
+        initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
+        tolerance=draw(st.sampled_from([0.0, 1e-9, 1e-7, 5e-5, 1e-3])))
+    commands = [tuple(draw(st.floats(-10.0, 10.0)) for _ in (0, 1)) for _ in (0, 1, 2)]
+    return scene, commands
+
+
+@settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 25)), deadline=None,
+          derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(case=smooth_runs())
+def test_random_smooth_runs_leave_the_books_as_python_leaves_them(case, monkeypatch):
+    scene, commands = case
+    python, fast = python_and_compiled(scene, monkeypatch)
+    for command, duration in zip(commands, (0.3, 0.05, 0.47)):
+        for sim in (python, fast):
+            sim.set_command(*command)
+        assert python.run(duration) == fast.run(duration)
+        assert books(python) == books(fast)
 
 
 def test_a_payload_grasped_between_runs_goes_on_from_the_same_books(monkeypatch):

@@ -309,10 +309,11 @@ PHI_SERIES = 0.5     # |z| below this: the phi functions by their series (no can
 def phi(z: float):
     """(e^z, phi1(z), phi2(z), phi3(z)) with phi_k(z) = sum_n z^n / (n + k)!."""
     if z > -PHI_SERIES:
-        p3, term = 0.0, 1.0
+        p3, term, power = 0.0, 1.0, 1.0
         for n in range(3, 20):       # 1/n! ... |z|^17/20! < 1e-23 at |z| = 0.5
             term /= n if n > 3 else 6.0
-            p3 = p3 + term * z ** (n - 3)
+            p3 = p3 + term * power
+            power = power * z        # z^(n-3) by products: pow differs in numba and libm
         p2 = 0.5 + z * p3
         p1 = 1.0 + z * p2
         return 1.0 + z * p1, p1, p2, p3

@@ -53,7 +53,7 @@ class Friction(Effect):
 
     def _magnitude(self, j: int) -> str:
         if self.curve(j - 1):
-            return f"fr{j} = FC{j} + DF{j} * exp(-(u{j} * INV_VS) ** 2)"
+            return f"fr{j} = FC{j} + DF{j} * exp(-(u{j} * INV_VS) * (u{j} * INV_VS))"
         return f"fr{j} = FC{j}"
 
     def forces(self) -> list[str]:

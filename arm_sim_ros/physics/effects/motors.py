@@ -143,7 +143,8 @@ class Motors(Effect):
     def stored_energy(self, arm, q, extra) -> float:
         if not self.windings:
             return 0.0
-        return 0.5 * (self.inductance[0] * extra[0] ** 2 + self.inductance[1] * extra[1] ** 2)
+        return 0.5 * (self.inductance[0] * extra[0] * extra[0]
+                      + self.inductance[1] * extra[1] * extra[1])
 
     def linear_decay(self) -> tuple:
         """R/L of each winding: the currents' linear decay, integrated exactly by the

@@ -32,7 +32,7 @@ class Springs(Effect):
 
     def stored_energy(self, arm, q, extra) -> float:
         (k1, k2), (r1, r2) = self.spring_constants, self.rest_positions
-        return 0.5 * (k1 * (q[0] - r1) ** 2 + k2 * (q[1] - r2) ** 2)
+        return 0.5 * (k1 * (q[0] - r1) * (q[0] - r1) + k2 * (q[1] - r2) * (q[1] - r2))
 
     def frequency(self, arm) -> float:
         # M⁻¹K has eigenvalues below max(k) λmax(M⁻¹): ω ≤ sqrt(max(k) Λ).
