@@ -40,7 +40,6 @@ from .integrators import compile_step
 from .shadow import LOST, MIN_EVERY, ROUNDING, Shadow, Twin, next_every
 
 NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
-# ROUNDING (shadow.py): the least scaled error per step a tolerance asks for (doubles)
 TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
 DEFAULT_MAX_SUBSTEPS = 1000   # the tolerance's ceiling per step (scene key max_substeps)
 MAX_SUBSTEPS = stability.MAX_SUBSTEPS   # what a scene may set it to

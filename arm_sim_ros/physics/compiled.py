@@ -252,8 +252,8 @@ class Kernel:
 
     def run(self, sim, left: int, largest: float):
         """(steps taken, largest |residual|) of Simulator.run without a callback: steps in
-        one compiled call while nothing is to be said; the step Python must take (a switching
-        scene, a driver, a retaken step, a fault ...) as Simulator.step, its residual
+        one compiled call while nothing is to be said; the step Python must take (a switch,
+        a driver, a new highest count, a fault ...) as Simulator.step, its residual
         compiled."""
         books, done, code = sim.accuracy, 0, 1
         if self.plain and not sim.diverged and isinstance(books, accuracy.Accuracy) and \

@@ -101,7 +101,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
             if not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states)
+    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False)
             if not (finite(new) and measured(G, states)):
                 code = 1
                 break
@@ -111,7 +111,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 first = scaled
                 while scaled > target and count < cap:    # a miss: taken again
                     count = retake(count, scaled / den, order, cap)
-                    new, error, scaled = doubled(state, h, count, K, G, factor, states)
+                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False)
                     if not (finite(new) and measured(G, states)) or (
                             count >= {GIVE_UP!r} * n and scaled > {NO_GAIN!r} * first):
                         code = 1                          # said: Python's
@@ -152,17 +152,20 @@ def substepped(state, h, n, K):
 
 
 @njit(cache=True)
-def doubled(state, h, n, K, G, factor, states):
+def doubled(state, h, n, K, G, factor, states, summed):
     """accuracy.Accuracy.measure: (the step as n sub-steps, its local error, its scaled
-    error), the signed local error of every state in G (Richardson: 2n half sub-steps)."""
+    error), the signed local error of every state into G (added to it where `summed`: a
+    switching step's pieces, accuracy.attempt) (Richardson: 2n half sub-steps)."""
     new = substepped(state, h, n, K)
     half = state
     hs = 0.5 * h / n
     for k in range(2 * n):
         half = step(half, hs, K)
     for k in range(states):
-        G[k] = (new[k] - half[k]) * factor
-    e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
+        signed = (new[k] - half[k]) * factor
+        G[k] = G[k] + signed if summed else signed
+    e0, e1 = abs((new[0] - half[0]) * factor), abs((new[1] - half[1]) * factor)  # this
+    e2, e3 = abs((new[2] - half[2]) * factor), abs((new[3] - half[3]) * factor)  # step's
     scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
     return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
 

@@ -8,7 +8,8 @@ MIN_EVERY, MAX_EVERY = 2, 32   # then as often as the local
 ROUGH, SMOOTH = 0.5, 0.125     # error moves: twice as often past ROUGH x its size, half
                                # as often under SMOOTH x its size
 LOST = 1.0                # rad (velocities scaled): a global error beyond this has lost the motion
-ROUNDING = 1e-13          # a local error under this is rounding (doubles): how it moves says nothing
+ROUNDING = 1e-13          # doubles' rounding: the least scaled error per step a tolerance asks
+                          # for (accuracy.py); a local error under it moves as it likes
 
 
 def next_every(every: int, predicted, measured) -> int:

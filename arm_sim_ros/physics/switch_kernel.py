@@ -128,20 +128,11 @@ def checked_step(state, h, n, K, E, G, states, factor):
     total, scaled = 0.0, 0.0
     dt = h if n == 1 else h / n
     for c in range(n):
-        new = step(state, dt, K)
+        new, error, part = doubled(state, dt, 1, K, G, factor, states, True)
         if near(state, new, dt, K, E):
             return new, True, total, scaled
-        hs = 0.5 * dt / 1
-        half = step(step(state, hs, K), hs, K)
-        e0 = abs((new[0] - half[0]) * factor)
-        e1 = abs((new[1] - half[1]) * factor)
-        e2 = abs((new[2] - half[2]) * factor)
-        e3 = abs((new[3] - half[3]) * factor)
-        for k in range(states):
-            G[k] = G[k] + (new[k] - half[k]) * factor
-        total += bigger(bigger(bigger(e0, e1), e2), e3)
-        scaled += bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))),
-                         e3 / (1.0 + abs(new[3])))
+        total += error
+        scaled += part
         state = new
     return state, False, total, scaled
 
