@@ -115,7 +115,8 @@ def hard_limit_scenes(draw):
         st.lists(st.floats(0.0, 50.0), min_size=2, max_size=2))))
     return Scene(step_size=h, initial_positions=q,
                  initial_velocities=tuple(draw(st.floats(-0.5, 0.5)) / h for _ in (0, 1)),
-                 joint_limits={"lower": lower, "upper": [lower[i] + gaps[i] for i in (0, 1)],
+                 joint_limits={"lower": lower,   # q inside to the last bit (not lower + gap)
+                               "upper": [q[i] + (1.0 - offsets[i]) * gaps[i] for i in (0, 1)],
                                "restitution": draw(st.floats(0.0, 1.0))},
                  friction=friction)
 
@@ -176,10 +177,13 @@ def test_compliant_limits_enter_and_leave_as_the_reference_does(scene):
     expected = reference.states([0.0, 0.2])[-1]
     sim = Simulator(scene)
     sim.run(0.2)
+    assert sim.fault is None and books_off(sim) < BOOKS
+    if sim.accuracy.shadow.lost:      # chaos (47 rad/s into k = 1e6 N m/rad, 90 bounces):
+        assert any("no longer follows" in e.message for e in sim.events)   # said, and
+        return                        # no motion to compare (test_error_estimate's rule)
     # every entry and exit the reference finds, and no motion apart: solve_ivp reads its
     # events at its own steps' ends, so a contact shorter than its step it can miss
     # (an elbow 1e-3 rad from its stop at 46 rad/s, in and out within its first step)
     assert sum(sim.switch_events.values()) >= len(reference.switch_times)
     # a stiff contact at the default tolerance: 9e-4 rad at 31 rad/s into k = 3e5 N m/rad
     assert max(abs(a - b) for a, b in zip(sim.state[:2], expected[:2])) < 1e-2
-    assert sim.fault is None and books_off(sim) < BOOKS

@@ -1,43 +1,39 @@
 """How far each step is from the exact flow, how far the run is from the true motion, and
 the sub-steps that keep each step under a tolerance.
 
-Local error (measured: benchmarks/bench_tolerance.py, test/test_error_estimate.py):
-Richardson step doubling on a schedule. A check takes the step (n equal sub-steps, bit
-for bit the plain step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1)
-is the step's local error at its end, signed, for every state (p = the tableau's order).
-At the end, not as n x the first sub-step: a stiff mode the stability plan's sub-steps
-damp out within the step has decayed by then. An embedded pair (dopri5) is measured
-against its own step at 1/TIGHTER of its tolerances. Checks come every MIN_EVERY steps
-at first, then as often as the local error moves (shadow.py: up to every MAX_EVERY; at
-rounding, under ROUNDING, it is measured against ROUNDING: at rest, every MAX_EVERY).
-Switching scenes (events.py): every step in which a switch is located, and every step
-with a compliant limit engaged, is checked, each smooth piece up to a switch doubled.
+Local error (benchmarks/bench_tolerance.py, test/test_error_estimate.py): Richardson step
+doubling on a schedule. A check takes the step (n equal sub-steps, bit for bit the plain
+step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1) is the step's
+local error at its end (where a stiff mode the plan's sub-steps damp has decayed), signed,
+for every state. An embedded pair (dopri5) is measured against its own step at 1/TIGHTER
+of its tolerances. Checks come every FIRST_EVERY steps at first, then as often as the local
+error moves (shadow.py: up to every MAX_EVERY; at rest, every MAX_EVERY). Switching scenes
+(events.py): a step with a located switch or an engaged compliant limit is checked, each
+piece doubled, the halves going on from their own state between switches (attempt).
 
-Global error (`accumulated_error`, shadow.py): the shadow takes the same steps as the
-run from the estimated true state, less each step's local error; the run's largest
-distance from it. It contracts where the motion contracts errors, grows where it grows
-them, and crosses every switch at its own time, so it stays within a factor of 10 of the
-true error on every preset, integrator and random scene (test/test_error_estimate.py).
-Past LOST (1 rad) the run says once that it no longer follows the true motion.
+Global error (`accumulated_error`, shadow.py): the shadow takes the same steps as the run
+from the estimated true state, less each step's local error; the run's largest distance
+from it, within a factor of 10 of the true error on every preset, integrator and random
+scene (test/test_error_estimate.py). Past LOST (1 rad) the run says once that it no
+longer follows the true motion.
 
 Tolerance (controller.py): the scaled error max(|e_q|, |e_qd| / (1 + |qd|)) of a step is
 held under tolerance x h (per simulated second, so the bound on the drift does not depend
-on h; angles unscaled: unwrapped, their size says nothing), never under ROUNDING. The
-sub-step count follows the error both ways (a PI controller); a step that misses is taken
-again; the stability plan's count is the floor and `max_substeps` the ceiling, said once
-when it cannot meet the tolerance, as is a tolerance that splitting does not reach. On
-switching scenes compliant contact, free flight and the pieces up to a located switch
-(whose length the switch sets) are controlled apart, and a count the controller asks for
-at a switch applies from the next step. 0 turns the controller off
-(estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s spin drifts 3.6e-7
-of its energy over 5 s at h = 10 ms, 1.5e-6 at 1 ms.
+on h; angles unscaled: unwrapped, their size says nothing), never under ROUNDING. A PI
+controller sets the sub-step count both ways; a step that misses is taken again; the
+stability plan's count is the floor and `max_substeps` the ceiling, said once when it
+cannot meet the tolerance, as is a tolerance that splitting does not reach. Compliant
+contact, free flight and the pieces up to a located switch are controlled apart. 0 turns
+the controller off (estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s
+spin drifts 3.1e-7 of its energy over 5 s at h = 10 ms, 1.4e-6 at 1 ms.
 """
 from __future__ import annotations
 
 from . import stability
-from .controller import SAFETY, Control, retake, said_count, said_unreachable
+from .controller import (SAFETY, Control, retake, said_count, said_lost,
+                         said_unreachable)
 from .integrators import compile_step
-from .shadow import LOST, MIN_EVERY, ROUNDING, Shadow, Twin, next_every
+from .shadow import FIRST_EVERY, ROUNDING, Shadow, Twin, next_every
 
 NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
 TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
@@ -73,7 +69,7 @@ class Accuracy:
         self.since = self.due = 0     # step index of the latest check; of the next
         self.booked_taken = 0         # sub-steps run in split steps before `since`
         self.shadow = Shadow(self.states)
-        self.every = MIN_EVERY        # steps between checks (schedule): often until it is smooth
+        self.every = FIRST_EVERY      # steps between checks (schedule): often until it is smooth
         self.tried = {}               # a switching step's attempts: part -> (count, scaled)
         self.said_lost = False
         self.cap = self.ceiling       # lowered where the tolerance cannot be reached
@@ -107,6 +103,8 @@ class Accuracy:
         if self.shadow.last is not y1:   # (a switching step may have been checked instead)
             self.shadow.follow(self.shadow_advance, f, y, y1, h, self.twin, before != (
                 self.stepper.total if self.stepper is not None else 0))
+            if self.shadow.lost:            # said when it is, not at the next check
+                said_lost(self, self.clock() if self.clock else 0, h)
         return y1
 
     def carry(self, previous, steps: int) -> None:
@@ -125,17 +123,18 @@ class Accuracy:
                                     if self.substeps > 1 else 0) + (
             self.stepper.extra_substeps if self.stepper is not None else 0)
 
-    def doubled(self, f, y, h, full, n=1) -> tuple[float, float, list]:
-        """(local error, scaled error, signed local error of every state) of y -> full, n
-        equal sub-steps over h, by taking it again as 2n half sub-steps (Richardson: the
-        difference x 2^p / (2^p - 1)): the error at the step's end, where a stiff mode's
-        early sub-step errors have decayed."""
+    def doubled(self, f, y, h, full, n=1, apart=None) -> tuple[float, float, list]:
+        """(local error, scaled error, signed error of every state) of y -> full, n sub-steps
+        over h, again as 2n half sub-steps (Richardson: the difference x 2^p / (2^p - 1)).
+        `apart` (attempt): y is that far from the motion's start; the error: what it adds."""
         hs = 0.5 * h / n
         for _ in range(2 * n):
             y = self.step(f, y, hs)
-        signed = [(a - b) * self.factor for a, b in zip(full[:self.states], y)]
-        errors = [abs(e) for e in signed[:self.width]]
-        # angles are unwrapped: their size says nothing of the error they can take
+        grown = [a - b - d for a, b, d in zip(full[:self.states], y, apart or [0.0] * len(y))]
+        if apart is not None:
+            apart[:] = [d + g for d, g in zip(apart, grown)]
+        signed = [g * self.factor for g in grown]
+        errors = [abs(e) for e in signed[:self.width]]   # angles unwrapped: not scaled
         scaled = max(max(errors[:2]), *(e / (1.0 + abs(a)) for e, a in zip(errors[2:], full[2:])))
         return max(errors), scaled, signed
 
@@ -238,12 +237,10 @@ class Accuracy:
             scale = (n / wanted) ** self.order
             self.shadow.local = [e * scale for e in self.shadow.local]
         self.use(wanted)
+        if soon:            # after a switch (or a first estimate) the schedule starts afresh
+            self.every = FIRST_EVERY
         self.due = index + (1 if soon else self.schedule(predicted, measured))
-        if self.shadow.lost and not self.said_lost and self.emit is not None:
-            self.said_lost = True
-            self.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = "
-                      f"{(index + 1) * h:.6g} s: the run no longer follows the true motion (a "
-                      "step too coarse for it, or chaos); the estimate stops at that bound")
+        said_lost(self, index, h)
         if self.tolerance:
             said_count(self, wanted, first, h, scaled)
 
@@ -253,10 +250,15 @@ def attempt(books, f, y, h):
     the parts: free flight (False), compliant contact (True), pieces up to a located switch
     (None: their length is the switch's, so only their own count can shorten them)."""
     sums = {False: [0.0, 0.0, 0], True: [0.0, 0.0, 0], None: [0.0, 0.0, 0]}
-    stepper, signed = books.stepper, [0.0] * books.states
+    stepper, signed, apart = books.stepper, [0.0] * books.states, [0.0] * books.states
 
     def piece(rhs, y0, dt, full, located=0):
-        error, scaled, vector = books.doubled(rhs, y0, dt, full, located or 1)
+        # the halves go on from their own state between switches: an early error is carried
+        # through the rest as the motion carries it (in an engaged stiff stop it turns)
+        start = [a - d for a, d in zip(y0, apart)] + list(y0[books.states:])
+        error, scaled, vector = books.doubled(rhs, y0 if located else start, dt, full,
+                                              located or 1, None if located else apart)
+        apart[:] = [0.0] * books.states if located else apart      # a switch: afresh
         part = sums[None if located else bool(stepper.mode[2] or stepper.mode[3])]
         part[0] += error
         part[1] += scaled
@@ -294,8 +296,7 @@ def more(books, sums, h) -> bool:
 
 def keep(stepper) -> tuple:
     """What a switching step changes in its stepper, to take the step again."""
-    return stepper.mode, stepper.last, stepper.total, dict(stepper.counts), \
-        stepper.extra_substeps
+    return stepper.mode, stepper.last, stepper.total, dict(stepper.counts), stepper.extra_substeps
 
 
 def restore(stepper, kept) -> None:
@@ -319,7 +320,7 @@ class Embedded:
     def reset(self) -> None:
         self.error_estimate = 0.0
         self.shadow = Shadow(self.states)
-        self.due, self.every = 0, MIN_EVERY
+        self.due, self.every = 0, FIRST_EVERY
 
     def carry(self, previous, steps: int) -> None:
         """Go on from the books `previous` after `steps` steps: their global error."""

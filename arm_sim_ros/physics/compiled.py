@@ -71,8 +71,9 @@ STORED["joint_limits"] = _limit_energy
 # What run_books writes in from the books' modules (kernels.py): the same numbers.
 BOOKS_CONSTANTS = {**{n: getattr(controller, n) for n in ("KI", "KP", "KEEP", "SAFETY",
                                                           "MAX_GROWTH", "MAX_SHRINK")},
-                   **{n: getattr(shadow, n) for n in ("ROUGH", "SMOOTH", "MIN_EVERY",
-                                                      "MAX_EVERY", "LOST", "ROUNDING")},
+                   **{n: getattr(shadow, n) for n in ("ROUGH", "SMOOTH", "FIRST_EVERY",
+                                                      "MIN_EVERY", "MAX_EVERY", "LOST",
+                                                      "ROUNDING")},
                    **{n: getattr(guard, n) for n in ("CHECK_EVERY", "FLOOR", "BOOKS_FRACTION")},
                    "GIVE_UP": accuracy.GIVE_UP, "NO_GAIN": accuracy.NO_GAIN,
                    "MAX_ANGLE": MAX_INITIAL_ANGLE}
@@ -192,6 +193,8 @@ def module_source(dynamics, step, rhs=None, guards=""):
     lines.append(energy[0] if energy else NO_ENERGY)
     fill = dict(items=", ".join(f"y[{k}]" for k in range(width)),
                 zitems=", ".join(f"z[{k}]" for k in range(width)),
+                ditems=", ".join(f"state[{k}] - D[{k}] if {k} < states else state[{k}]"
+                                 for k in range(width)),
                 columns=", ".join(f"Y[{k}, a]" for k in range(width)),
                 width=width, **BOOKS_CONSTANTS)
     lines.append(KERNELS.format(**fill))
@@ -245,7 +248,8 @@ class Kernel:
                                       **getattr(step, "constants", {})})
         self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
         width = 4 + len(dynamics.extra) + len(dynamics.channels)
-        self.y, self.z, self.L, self.O, self.G, self.S = (np.zeros(width) for _ in range(6))
+        self.y, self.z, self.L, self.O, self.G, self.S, self.D = (np.zeros(width)
+                                                                  for _ in range(7))
         self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(15)
         self.command, self.lowest = dynamics.command, None
         self.switched = None      # a switching scene's runs in one mode (switch_run.py)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from math import ceil, isfinite
 
+from .shadow import LOST
+
 SAFETY = 0.5              # counts aim at half the tolerance: fewer retaken steps
 KI, KP = 0.7, 0.4         # PI gains on ln(error) (Hairer & Wanner's 0.7/k, 0.4/k)
 MAX_GROWTH = 2.0          # a sub-step grows at most 2x per check ...
@@ -83,3 +85,12 @@ def said_unreachable(books, scaled, n, h) -> None:
                    f"{n} sub-steps left the local error at {scaled / h:.3g} per s "
                    "(scaled), as fewer did (rounding, or an error sub-steps do not "
                    f"reduce); the run stays at {n} sub-steps per step")
+
+
+def said_lost(books, index: int, h: float) -> None:
+    """The shadow lost the motion in step `index` (or before): said once, when it is."""
+    if books.shadow.lost and not books.said_lost and books.emit is not None:
+        books.said_lost = True
+        books.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = "
+                   f"{(index + 1) * h:.6g} s: the run no longer follows the true motion (a "
+                   "step too coarse for it, or chaos); the estimate stops at that bound")

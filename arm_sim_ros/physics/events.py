@@ -219,8 +219,9 @@ class Switching:
                 mode[2 + i] = 0
             elif kind == "impact":
                 impulse(self, y, mode, i, located)
+        too = stopping_too(self, y, mode) if any(kind == "stop" for kind, _ in fired) else []
         self.mode = self.settle(y, self.clamped(y, tuple(mode)))   # clamps: found from y
-        for kind, i in fired[:1]:
+        for kind, i in fired[:1] + too:
             if kind == "stop":
                 kind = "stick" if self.mode[i] == "stuck" else "reverse"
             elif kind == "impact":
@@ -314,6 +315,20 @@ def fired(guard, kinds, y) -> list:
     return [kinds[n] for n in order if values[n] < 0.0]
 
 
+def stopping_too(stepper, y, mode) -> list:
+    """A joint still sliding whose velocity reaches zero within TIME_TOLERANCE of a stop
+    stops with it: joints that stop at one instant are stuck together and settled
+    together (worst first), not one at a time in an order rounding picks (a joint decided
+    while the other still slid at 1e-100 rad/s). Those stopped here, as fired switches."""
+    acceleration, too = stepper.functions(tuple(mode))[0](*y[:stepper.width]), []
+    for j in (0, 1):
+        u, a = y[2 + j], acceleration[j]
+        if mode[j] in ("+", "-") and u * a < 0.0 and abs(u) <= abs(a) * TIME_TOLERANCE:
+            y[2 + j], mode[j] = 0.0, "stuck"
+            too.append(("stop", j))
+    return too
+
+
 def impulse(stepper, y, mode, i, located) -> None:
     """Joint i arrives at a hard limit: q̇ᵢ -> −e q̇ᵢ by an impulse along it (a slow
     bounce, or one past the step's quota, ends at rest); the other joint's velocity changes
@@ -321,8 +336,10 @@ def impulse(stepper, y, mode, i, located) -> None:
     quota: any limit it rests on, or two resting joints would kick each other off their
     stops for ever). The kinetic energy lost is booked."""
     j, limits = 1 - i, stepper.limits
-    v = y[2 + i]                                  # the stop it arrives at: a hair's gap
-    upper = v > 0.0 if v else y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
+    v = y[2 + i]          # the stop it is past or on; a hair before one, the one it moves to
+    past = y[i] >= limits.upper[i] or y[i] <= limits.lower[i]   # (a velocity of rounding's
+    upper = y[i] >= limits.upper[i] if past else v > 0.0 if v else (   # size, either sign)
+        y[i] > 0.5 * (limits.lower[i] + limits.upper[i]))
     if not located or not limits.lower[i] <= y[i] <= limits.upper[i]:
         y[i] = limits.upper[i] if upper else limits.lower[i]   # late, or past by rounding
     bounce = not stepper.plastic and limits.restitution * abs(v) >= REST_SPEED

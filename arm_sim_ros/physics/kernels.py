@@ -42,10 +42,10 @@ AFTER
 SHADOW
             now_shade = corrected(z1, z, G if check else L, states)
             now_lost, now_far = landed(new, z, far)
+        if now_lost == 1 and said_lost == 0:          # said by the books: Python's
+            code = 1
+            break
         if check:
-            if now_lost == 1 and said_lost == 0:      # said by the books: Python's
-                code = 1
-                break
             taken += (n * (steps - since) if n > 1 else 0) + (count if count > 1 else 0)
             since, estimate, previous = steps + 1, error, kept
             booked(L, G, states, count, wanted, orderf)
@@ -101,7 +101,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
             if not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False)
+    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False, G, False)
             if not (finite(new) and measured(G, states)):
                 code = 1
                 break
@@ -111,7 +111,8 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 first = scaled
                 while scaled > target and count < cap:    # a miss: taken again
                     count = retake(count, scaled / den, order, cap)
-                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False)
+                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False, G,
+                                                   False)
                     if not (finite(new) and measured(G, states)) or (
                             count >= {GIVE_UP!r} * n and scaled > {NO_GAIN!r} * first):
                         code = 1                          # said: Python's
@@ -152,20 +153,28 @@ def substepped(state, h, n, K):
 
 
 @njit(cache=True)
-def doubled(state, h, n, K, G, factor, states, summed):
-    """accuracy.Accuracy.measure: (the step as n sub-steps, its local error, its scaled
-    error), the signed local error of every state into G (added to it where `summed`: a
-    switching step's pieces, accuracy.attempt) (Richardson: 2n half sub-steps)."""
+def doubled(state, h, n, K, G, factor, states, summed, D, carried):
+    """accuracy.Accuracy.doubled: (the step as n sub-steps, its local error, its scaled
+    error), the signed local error of every state into G (Richardson: 2n half sub-steps).
+    Where `summed` (a switching step's sub-steps, accuracy.attempt), added to G, and the
+    difference grown added to D, which the halves start apart by where `carried`."""
     new = substepped(state, h, n, K)
-    half = state
+    half = ({ditems},) if carried else state
     hs = 0.5 * h / n
     for k in range(2 * n):
         half = step(half, hs, K)
+    e0, e1, e2, e3 = 0.0, 0.0, 0.0, 0.0
     for k in range(states):
-        signed = (new[k] - half[k]) * factor
-        G[k] = G[k] + signed if summed else signed
-    e0, e1 = abs((new[0] - half[0]) * factor), abs((new[1] - half[1]) * factor)  # this
-    e2, e3 = abs((new[2] - half[2]) * factor), abs((new[3] - half[3]) * factor)  # step's
+        grown = new[k] - half[k] - D[k] if carried else new[k] - half[k]
+        signed = grown * factor
+        if summed:
+            D[k] = D[k] + grown
+            G[k] = G[k] + signed
+        else:
+            G[k] = signed
+        if k < 4:
+            e0, e1, e2, e3 = (abs(signed) if k == 0 else e0, abs(signed) if k == 1 else e1,
+                              abs(signed) if k == 2 else e2, abs(signed) if k == 3 else e3)
     scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
     return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
 

@@ -3,10 +3,11 @@ measure the local error it is built from (accuracy.py).
 """
 from __future__ import annotations
 
-# Steps between doubling checks (a check: 2 steps' evaluations): MIN_EVERY at the start,
-MIN_EVERY, MAX_EVERY = 2, 32   # then as often as the local
-ROUGH, SMOOTH = 0.5, 0.125     # error moves: twice as often past ROUGH x its size, half
-                               # as often under SMOOTH x its size
+# Steps between doubling checks (a check: 2 steps' evaluations): FIRST_EVERY at the start,
+FIRST_EVERY, MIN_EVERY, MAX_EVERY = 2, 1, 32   # then as often as the local error moves:
+ROUGH, SMOOTH = 0.5, 0.125     # twice as often past ROUGH x its size (down to every step: a
+                               # local error that turns within 4 steps, checked every 2, can
+                               # be seen at its zeros only), half as often under SMOOTH x it
 LOST = 1.0                # rad (velocities scaled): a global error beyond this has lost the motion
 ROUNDING = 1e-13          # doubles' rounding: the least scaled error per step a tolerance asks
                           # for (accuracy.py); a local error under it moves as it likes

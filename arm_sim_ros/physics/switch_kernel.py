@@ -119,16 +119,17 @@ def smooth_step(state, h, n, K, E):
 
 
 @njit(cache=True)
-def checked_step(state, h, n, K, E, G, states, factor):
+def checked_step(state, h, n, K, E, G, D, states, factor):
     """accuracy.Accuracy.switching's attempt of a step in one mode: (the step, near as in
     smooth_step, the summed error, the summed scaled error), every sub-step doubled, the
-    signed errors summed into G."""
+    halves going on from their own state (D apart), the signed errors summed into G."""
     for k in range(states):
         G[k] = 0.0
+        D[k] = 0.0
     total, scaled = 0.0, 0.0
     dt = h if n == 1 else h / n
     for c in range(n):
-        new, error, part = doubled(state, dt, 1, K, G, factor, states, True)
+        new, error, part = doubled(state, dt, 1, K, G, factor, states, True, D, c > 0)
         if near(state, new, dt, K, E):
             return new, True, total, scaled
         total += error
@@ -141,7 +142,7 @@ def checked_step(state, h, n, K, E, G, states, factor):
 
 
 SWITCH_PARTS = dict(    # run_switching: a switching scene's steps in one mode
-    NAME="run_switching", MORE=", X, E",
+    NAME="run_switching", MORE=", X, E, D",
     # a first estimate (none predicted, accuracy.book's `soon`): checked at the next step
     NEXT="(new_every if known == 1 else 1)",
     DOC='''run_books for a switching scene in one mode: up to `left` steps from y, each
@@ -155,7 +156,7 @@ SWITCH_PARTS = dict(    # run_switching: a switching scene's steps in one mode
             if ends or not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new, ends, total, summed = checked_step(state, h, n, K, E, G, states, factor)
+    CHECKED='''            new, ends, total, summed = checked_step(state, h, n, K, E, G, D, states, factor)
             if ends or not finite(new):
                 code = 1
                 break
@@ -171,7 +172,9 @@ SWITCH_PARTS = dict(    # run_switching: a switching scene's steps in one mode
                 wanted, kept = ask(n, summed / den, previous, order, floor, fcap)
                 if wanted > most and wanted > 2 * max(1, most):   # said: Python's
                     code = 1
-                    break''',
+                    break
+            if known == 0:                    # a first estimate: the schedule starts afresh
+                new_every = {FIRST_EVERY!r}''',
     AFTER='''        if X[3] != 0.0 and driven(new, K) >= 0.0:   # the driver's count: Python's
             code = 1
             break''',

@@ -43,7 +43,7 @@ class Switched:
                      edge, self.driven)
         since = books.since
         done, largest, code = kernel.books_run(sim, books, left, largest, module.run_switching,
-                                               K, (self.X, self.E))
+                                               K, (self.X, self.E, kernel.D))
         if done:
             stepper.last = sim.state             # the mode goes on from here
             if books.shadow.last is sim.state:

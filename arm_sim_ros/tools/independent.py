@@ -19,6 +19,8 @@ from scipy.integrate import solve_ivp
 TOLERANCE = 1e-12
 REST_SPEED = 1e-4          # a bounce slower than this ends at rest (the documented rule)
 SAME_INSTANT = 64          # switches at one instant past which this reference cannot decide
+MAX_STEP = 5e-4            # s: solve_ivp finds an event by a sign change over its step, so a
+                           # velocity through zero and back within one step would be missed
 
 
 class Undecided(Exception):
@@ -248,7 +250,8 @@ class Independent:
                 return [y[2], y[3], *self.solve(y, mode, zone)[0]]
 
             sol = solve_ivp(rates, (t, end), x, method="DOP853", rtol=TOLERANCE,
-                            atol=TOLERANCE, events=[g for g, _, _ in events], dense_output=True)
+                            atol=TOLERANCE, events=[g for g, _, _ in events], dense_output=True,
+                            max_step=MAX_STEP)
             stop = end if sol.status != 1 else min(
                 ts[0] for ts in sol.t_events if len(ts))
             while k < len(times) and times[k] <= stop and (times[k] < stop or sol.status != 1):

@@ -281,6 +281,8 @@ def sampled_step(sim, take, f):
     it, each taken there; one at the step's start first. Within each piece the torque is a
     constant and RK4 keeps its order."""
     at_start, inside = sim.sampled.samples_in(sim.steps)
+    if at_start or inside:   # a new torque moves the local error at once: checked (as a
+        take = sim.accuracy.check              # new command is, simulator.set_command)
     if at_start:
         sim.state = sample(sim, sim.state)
     y, done = sim.state, 0.0
