@@ -71,12 +71,11 @@ class Accuracy:
         self.shadow = Shadow(self.states)
         self.every = FIRST_EVERY      # steps between checks (schedule): often until it is smooth
         self.tried = {}               # a switching step's attempts: part -> (count, scaled)
-        self.said_lost = False
         self.cap = self.ceiling       # lowered where the tolerance cannot be reached
         self.free = Control(self.base, self.cap)
         self.contact = Control(0, self.cap)      # engaged pieces (switching stepper)
         self.most = self.base         # the largest count said so far
-        self.capped = False           # said once: the tolerance was not met at the cap
+        self.capped = self.said_lost = False   # said once: not met at the cap; the motion lost
         self.substeps = -1
         self.use(self.base)
         if self.stepper is not None:
@@ -90,7 +89,6 @@ class Accuracy:
         if n != self.substeps:
             self.substeps = n
             if self.stepper is not None:
-                self.stepper.substeps = n
                 self.advance = self.stepper.advance
             else:
                 self.advance = stability.substepping(self.step, n)
@@ -124,9 +122,11 @@ class Accuracy:
             self.stepper.extra_substeps if self.stepper is not None else 0)
 
     def doubled(self, f, y, h, full, n=1, apart=None) -> tuple[float, float, list]:
-        """(local error, scaled error, signed error of every state) of y -> full, n sub-steps
-        over h, again as 2n half sub-steps (Richardson: the difference x 2^p / (2^p - 1)).
-        `apart` (attempt): y is that far from the motion's start; the error: what it adds."""
+        """(local error, scaled error, signed error of every state) of y -> full (n sub-steps
+        of h) against 2n half sub-steps, x 2^p / (2^p - 1) (Richardson). `apart` (attempt):
+        the halves start that far from y, and what this piece grows is added to it."""
+        if apart is not None:
+            y = [a - d for a, d in zip(y, apart)] + list(y[self.states:])
         hs = 0.5 * h / n
         for _ in range(2 * n):
             y = self.step(f, y, hs)
@@ -253,12 +253,11 @@ def attempt(books, f, y, h):
     stepper, signed, apart = books.stepper, [0.0] * books.states, [0.0] * books.states
 
     def piece(rhs, y0, dt, full, located=0):
-        # the halves go on from their own state between switches: an early error is carried
-        # through the rest as the motion carries it (in an engaged stiff stop it turns)
-        start = [a - d for a, d in zip(y0, apart)] + list(y0[books.states:])
-        error, scaled, vector = books.doubled(rhs, y0 if located else start, dt, full,
-                                              located or 1, None if located else apart)
-        apart[:] = [0.0] * books.states if located else apart      # a switch: afresh
+        # the halves go on between switches: an early error carried as the motion carries it
+        error, scaled, vector = books.doubled(rhs, y0, dt, full, located or 1,
+                                              None if located else apart)
+        if located:                       # after a switch the halves start afresh
+            apart[:] = [0.0] * books.states
         part = sums[None if located else bool(stepper.mode[2] or stepper.mode[3])]
         part[0] += error
         part[1] += scaled

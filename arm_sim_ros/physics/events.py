@@ -316,10 +316,9 @@ def fired(guard, kinds, y) -> list:
 
 
 def stopping_too(stepper, y, mode) -> list:
-    """A joint still sliding whose velocity reaches zero within TIME_TOLERANCE of a stop
-    stops with it: joints that stop at one instant are stuck together and settled
-    together (worst first), not one at a time in an order rounding picks (a joint decided
-    while the other still slid at 1e-100 rad/s). Those stopped here, as fired switches."""
+    """A sliding joint whose velocity reaches zero within TIME_TOLERANCE of a stop stops
+    with it, to be settled together (worst first), not one at a time in an order rounding
+    picks (while the other slid at 1e-100 rad/s). Those stopped here, as fired switches."""
     acceleration, too = stepper.functions(tuple(mode))[0](*y[:stepper.width]), []
     for j in (0, 1):
         u, a = y[2 + j], acceleration[j]
@@ -336,10 +335,11 @@ def impulse(stepper, y, mode, i, located) -> None:
     quota: any limit it rests on, or two resting joints would kick each other off their
     stops for ever). The kinetic energy lost is booked."""
     j, limits = 1 - i, stepper.limits
-    v = y[2 + i]          # the stop it is past or on; a hair before one, the one it moves to
-    past = y[i] >= limits.upper[i] or y[i] <= limits.lower[i]   # (a velocity of rounding's
-    upper = y[i] >= limits.upper[i] if past else v > 0.0 if v else (   # size, either sign)
-        y[i] > 0.5 * (limits.lower[i] + limits.upper[i]))
+    v = y[2 + i]
+    if y[i] >= limits.upper[i] or y[i] <= limits.lower[i]:   # past or on a stop: that one,
+        upper = y[i] >= limits.upper[i]      # whichever way a velocity of rounding's size points
+    else:                                    # a hair before one: the one it moves to
+        upper = v > 0.0 if v else y[i] > 0.5 * (limits.lower[i] + limits.upper[i])
     if not located or not limits.lower[i] <= y[i] <= limits.upper[i]:
         y[i] = limits.upper[i] if upper else limits.lower[i]   # late, or past by rounding
     bounce = not stepper.plastic and limits.restitution * abs(v) >= REST_SPEED

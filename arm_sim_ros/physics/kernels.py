@@ -101,7 +101,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
             if not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False, G, False)
+    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False, G)
             if not (finite(new) and measured(G, states)):
                 code = 1
                 break
@@ -111,8 +111,8 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 first = scaled
                 while scaled > target and count < cap:    # a miss: taken again
                     count = retake(count, scaled / den, order, cap)
-                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False, G,
-                                                   False)
+                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False,
+                                                   G)
                     if not (finite(new) and measured(G, states)) or (
                             count >= {GIVE_UP!r} * n and scaled > {NO_GAIN!r} * first):
                         code = 1                          # said: Python's
@@ -153,28 +153,33 @@ def substepped(state, h, n, K):
 
 
 @njit(cache=True)
-def doubled(state, h, n, K, G, factor, states, summed, D, carried):
+def grown(new, half, D, k, summed):
+    """State k's difference of the step from its halves, less where they started apart."""
+    return new[k] - half[k] - D[k] if summed else new[k] - half[k]
+
+
+@njit(cache=True)
+def doubled(state, h, n, K, G, factor, states, summed, D):
     """accuracy.Accuracy.doubled: (the step as n sub-steps, its local error, its scaled
     error), the signed local error of every state into G (Richardson: 2n half sub-steps).
-    Where `summed` (a switching step's sub-steps, accuracy.attempt), added to G, and the
-    difference grown added to D, which the halves start apart by where `carried`."""
+    Where `summed` (a switching step's sub-steps, accuracy.attempt), the halves start D
+    from the state, and what this sub-step grows is added to D and, signed, to G."""
     new = substepped(state, h, n, K)
-    half = ({ditems},) if carried else state
+    half = ({ditems},) if summed else state
     hs = 0.5 * h / n
     for k in range(2 * n):
         half = step(half, hs, K)
-    e0, e1, e2, e3 = 0.0, 0.0, 0.0, 0.0
+    e0 = abs(grown(new, half, D, 0, summed) * factor)       # this (sub-)step's own, before
+    e1 = abs(grown(new, half, D, 1, summed) * factor)       # D moves on
+    e2 = abs(grown(new, half, D, 2, summed) * factor)
+    e3 = abs(grown(new, half, D, 3, summed) * factor)
     for k in range(states):
-        grown = new[k] - half[k] - D[k] if carried else new[k] - half[k]
-        signed = grown * factor
+        difference = grown(new, half, D, k, summed)
         if summed:
-            D[k] = D[k] + grown
-            G[k] = G[k] + signed
+            D[k] = D[k] + difference
+            G[k] = G[k] + difference * factor
         else:
-            G[k] = signed
-        if k < 4:
-            e0, e1, e2, e3 = (abs(signed) if k == 0 else e0, abs(signed) if k == 1 else e1,
-                              abs(signed) if k == 2 else e2, abs(signed) if k == 3 else e3)
+            G[k] = difference * factor
     scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
     return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
 

@@ -129,7 +129,7 @@ def checked_step(state, h, n, K, E, G, D, states, factor):
     total, scaled = 0.0, 0.0
     dt = h if n == 1 else h / n
     for c in range(n):
-        new, error, part = doubled(state, dt, 1, K, G, factor, states, True, D, c > 0)
+        new, error, part = doubled(state, dt, 1, K, G, factor, states, True, D)
         if near(state, new, dt, K, E):
             return new, True, total, scaled
         total += error
