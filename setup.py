@@ -41,7 +41,7 @@ setup(
         "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
         "bench": ["mujoco==4.0.0"],
         "fit": ["dask==2026.8.0", "distributed==2026.8.0"],   # arm-sim fit --scheduler
-        "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled.py)
+        "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled/build.py)
     },
     zip_safe=True,
     maintainer="arm_sim_ros developers",

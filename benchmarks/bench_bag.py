@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from arm_sim_ros.tools.run_bag import RunBag, steps_per_publish
+from arm_sim_ros.tools.run.bag import RunBag, steps_per_publish
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -56,8 +56,8 @@ def record_throughput(messages: int, domain: int) -> tuple[float, int]:
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from arm_sim_ros.node import messages as wire
-    from arm_sim_ros.tools.record import DEFAULT_TOPICS, record
+    from arm_sim_ros.node.wire import messages as wire
+    from arm_sim_ros.tools.wire.record import DEFAULT_TOPICS, record
     from arm_sim_ros.tools.signals import StopOnSignals
 
     publisher = wire.make_participant(domain, wire.LOOPBACK_CONFIG)

@@ -8,7 +8,7 @@ step; hinges about z, no contacts); each keeps the fastest of --repeat runs of -
 steps. The runs go in rounds, every row (ours, then MuJoCo's) once per round in an order
 rotated from round to round, so that a noisy moment slows all rows alike. The last row is
 the geared_arm preset itself. The effects in MuJoCo's own terms are mujoco_peer's (the
-table in arm_sim_ros/tools/mujoco_peer.py's docstring); the effort-limit rows ask a constant
+table in arm_sim_ros/tools/accuracy/mujoco_peer.py's docstring); the effort-limit rows ask a constant
 torque above the limits (both simulators clamp it), and controller_model is ours only.
 
 Agreement: both simulators run the row's scene for 1 s at h = 1e-3 from the same state;
@@ -40,8 +40,8 @@ from arm_sim_ros.physics import model as arm_model  # noqa: E402
 from arm_sim_ros.physics.effects import Motors  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
-from arm_sim_ros.tools import mujoco_peer  # noqa: E402
-from arm_sim_ros.tools.mujoco_peer import mujoco_data, reset  # noqa: E402
+from arm_sim_ros.tools.accuracy import mujoco_peer  # noqa: E402
+from arm_sim_ros.tools.accuracy.mujoco_peer import mujoco_data, reset  # noqa: E402
 
 STEP = 1e-3              # s: the windings' L/R is 0.53 ms, so h must be this small
 CHECK_SECONDS = 1.0      # agreement run
@@ -93,7 +93,7 @@ ROWS = [
 
 def mujoco_model(scene):
     """(MjModel, ctrl) of the scene with its effects in MuJoCo's terms (RK4), or (None, why)
-    where MuJoCo has no counterpart for one of them (arm_sim_ros.tools.mujoco_peer)."""
+    where MuJoCo has no counterpart for one of them (arm_sim_ros.tools.accuracy.mujoco_peer)."""
     try:
         return mujoco_peer.mujoco_model(scene, "RK4")
     except mujoco_peer.Unsupported as error:

@@ -11,7 +11,7 @@ Tables printed (timings are wall-clock on whatever else the machine runs: noisy)
    same orders against an independent solve_ivp(events=...) reference);
 4. sub-steps a compliant limit takes while engaged, over k and h (0 switching cost while
    no joint is beyond its limit);
-5. what reading the guards between a sub-step's ends costs (physics/dense.py: a mode that
+5. what reading the guards between a sub-step's ends costs (physics/switching/dense.py: a mode that
    ends and comes back within one sub-step), against reading them at its end only, the
    two interleaved in one process.
 
@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchma
 
 from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
 
-from arm_sim_ros.physics import dense, events  # noqa: E402
+from arm_sim_ros.physics.switching import dense, events  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 

@@ -1,6 +1,6 @@
 """`arm-sim fit` on the full done-when case: what it recovers and how long it takes.
 
-A recording made by a different simulator (test/test_fit_reference.py: scipy DOP853 on
+A recording made by a different simulator (test/tools/test_fit_reference.py: scipy DOP853 on
 separately written equations with located friction events), 10 s at 500 Hz, Gaussian noise
 1e-4 rad and 1e-3 rad/s, a multi-sine; hidden damping, Coulomb friction, rotor inertia
 (through 50:1 and 30:1 gears) and payload mass, all four keys (seven numbers) freed from
@@ -26,8 +26,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
 
-from test_fit import TRUTH, WRONG, base_args, write_bag  # noqa: E402
-from test_fit_reference import recording  # noqa: E402
+from tools.test_fit import TRUTH, WRONG, base_args, write_bag  # noqa: E402
+from tools.test_fit_reference import recording  # noqa: E402
 
 from arm_sim_ros.tools import cli  # noqa: E402
 

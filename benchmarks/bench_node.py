@@ -17,7 +17,8 @@ import subprocess
 import sys
 import time
 
-from arm_sim_ros.node import core as node_core, messages as msg
+from arm_sim_ros.node import core as node_core
+from arm_sim_ros.node.wire import messages as msg
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
 DOMAIN = 39
@@ -26,7 +27,7 @@ SUBSCRIBER = """
 import sys, time
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from arm_sim_ros.node import messages as msg
+from arm_sim_ros.node.wire import messages as msg
 p = msg.make_participant({domain}, {config!r})
 r = DataReader(p, Topic(p, "rt/joint_states", msg.JointState), qos=msg.default_qos(msg.JointState))
 print("ready", flush=True)

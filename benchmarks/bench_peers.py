@@ -1,6 +1,6 @@
 """Our arm side by side with the same arm in MuJoCo, timed in the same run.
 
-The MuJoCo model is built from the scene by arm_sim_ros.tools.mujoco_peer (hinges about z,
+The MuJoCo model is built from the scene by arm_sim_ros.tools.accuracy.mujoco_peer (hinges about z,
 gravity along -y, explicit inertials, no contacts), as `arm-sim accuracy` builds it. Built
 this way MuJoCo's RK4 reproduces ours to ~1e-15. Errors are the max state error against the DOP853 reference (study.reference)
 at every publish time; times are the fastest of --repeat runs; ratios are against ours.
@@ -23,8 +23,8 @@ from bench_core import fastest  # noqa: E402  (the benchmarks' best-of-repeats t
 from arm_sim_ros.physics.batch import Batch  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
-from arm_sim_ros.tools.accuracy import reference, sample_times  # noqa: E402
-from arm_sim_ros.tools.mujoco_peer import mujoco_data, mujoco_model, reset  # noqa: E402
+from arm_sim_ros.tools.accuracy.command import reference, sample_times  # noqa: E402
+from arm_sim_ros.tools.accuracy.mujoco_peer import mujoco_data, mujoco_model, reset  # noqa: E402
 
 
 def ours_single(scene, steps: int):

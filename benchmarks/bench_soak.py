@@ -64,7 +64,7 @@ def simulator_soak(scale: float) -> None:
 
 
 def node_soak(seconds: float) -> None:
-    from arm_sim_ros.node import messages as msg
+    from arm_sim_ros.node.wire import messages as msg
     from arm_sim_ros.node.transports.dds import DdsArmSimNode
 
     domain = 79
@@ -137,8 +137,8 @@ def nearby(value):
 
 
 def live_changes(values: dict) -> list:
-    """[(name, [values])] of every parameter that changes live (node/parameters.py)."""
-    from arm_sim_ros.node.parameters import PARAMETERS, START
+    """[(name, [values])] of every parameter that changes live (node/params/parameters.py)."""
+    from arm_sim_ros.node.params.parameters import PARAMETERS, START
     changes = []
     for spec in PARAMETERS:
         if spec.when == START:
@@ -151,7 +151,8 @@ def live_changes(values: dict) -> list:
 
 def wire(value):
     """(ParameterType, value) of a Python value."""
-    from arm_sim_ros.node.parameter_services import BOOL, DOUBLE, DOUBLE_ARRAY, STRING, STRING_ARRAY
+    from arm_sim_ros.node.services.parameter_services import (BOOL, DOUBLE, DOUBLE_ARRAY,
+                                                              STRING, STRING_ARRAY)
     if isinstance(value, bool):
         return BOOL, value
     if isinstance(value, str):
@@ -174,7 +175,7 @@ def changes_soak(seconds: float, rate: float, window: float = 5.0, record: bool 
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from arm_sim_ros.node import messages as msg
+    from arm_sim_ros.node.wire import messages as msg
     from arm_sim_ros.node.transports import dds_service_types as t
     from arm_sim_ros.node.transports.dds import DdsArmSimNode
     from arm_sim_ros.node.transports.dds_services import cs_id, endpoint_qos, to_value

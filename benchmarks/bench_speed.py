@@ -36,12 +36,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from arm_sim_ros.physics import compiled  # noqa: E402
+from arm_sim_ros.physics.compiled import build as compiled  # noqa: E402
 from arm_sim_ros.physics.batch import Batch  # noqa: E402
 from arm_sim_ros.physics.dynamics import build_dynamics  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene, preset_names  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
-from arm_sim_ros.tools import mujoco_peer  # noqa: E402
+from arm_sim_ros.tools.accuracy import mujoco_peer  # noqa: E402
 
 
 def fastest(run, repeat: int) -> float:

@@ -23,7 +23,7 @@ from scipy.integrate import solve_ivp
 from arm_sim_ros.physics import model
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
-from arm_sim_ros.physics.stability import SUBSTEP_FRACTION, stiffness, substepping
+from arm_sim_ros.physics.stepping.stability import SUBSTEP_FRACTION, stiffness, substepping
 
 BASE = load_scene("damped_release")
 ARM = BASE.arm

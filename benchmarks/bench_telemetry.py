@@ -42,8 +42,10 @@ import rerun as rr
 
 from arm_sim_ros.tools import cli
 from arm_sim_ros.physics import model
-from arm_sim_ros.node import core as node_core, parameters
-from arm_sim_ros.recording import blueprint, readouts, telemetry, writer
+from arm_sim_ros.node import core as node_core
+from arm_sim_ros.node.params import parameters
+from arm_sim_ros.recording.rrd import blueprint, telemetry, writer
+from arm_sim_ros.recording import readouts
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 

@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchma
 
 from bench_core import time_simulator  # noqa: E402  (best-of-repeats Simulator.step timing)
 
-from arm_sim_ros.physics.accuracy import DEFAULT_TOLERANCE  # noqa: E402
+from arm_sim_ros.physics.trust.accuracy import DEFAULT_TOLERANCE  # noqa: E402
 from arm_sim_ros.physics.scene import Scene, load_scene, preset_names  # noqa: E402
 from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 

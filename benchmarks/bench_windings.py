@@ -23,9 +23,9 @@ sys.path.insert(0, str(HERE))                  # the sibling benchmark scripts
 sys.path.insert(1, str(HERE.parent / "test"))  # test_effects' FirstPrinciples
 
 from bench_speed import fastest, simulator  # noqa: E402
-from test_effects import FirstPrinciples  # noqa: E402
+from physics.test_effects import FirstPrinciples  # noqa: E402
 
-from arm_sim_ros.physics import compiled  # noqa: E402
+from arm_sim_ros.physics.compiled import build as compiled  # noqa: E402
 from arm_sim_ros.physics.scene import load_scene  # noqa: E402
 
 METHODS = ("rk4", "exponential_rk4")
@@ -67,7 +67,7 @@ def convergence(seconds: float = 0.2) -> list[str]:
 def books_by_channel(h: float = 1e-3, seconds: float = 0.2) -> list[str]:
     """Each book's error against FirstPrinciples' own (integrated with the motion by DOP853),
     and E's: which quadrature leaves the residual (tolerance 0)."""
-    from test_effects import BOOKS
+    from physics.test_effects import BOOKS
     lines = [f"books at t = {seconds:g} s, h = {h * 1e3:g} ms, tolerance 0: ours - reference (J)",
              f"{'':7}{'method':<16}" + "".join(f"{b:>18}" for b in BOOKS) + f"{'E':>10}"
              f"{'residual':>10}"]

@@ -6,7 +6,7 @@ been reported: "corrupted double-linked list" / "double free" while native libra
 unloaded in an arbitrary order at exit, turning a green run into exit code 134. Not
 reproduced in isolation (6 + 3 reruns of the suspects; with ROS sourced, 1100 runs of rclpy
 beside cyclonedds and the suite with this teardown kept, under MALLOC_CHECK_=3 too: see
-docs/reliability.md, "At exit"). The results are final by then, so
+docs/guides/reliability.md, "At exit"). The results are final by then, so
 the run exits with pytest's own status as soon as every plugin has finished: the session's
 exitstatus as it stands at the last pytest_unconfigure, after every sessionfinish hook (a
 later one may still change it, e.g. with pytest.exit(returncode=...)).

@@ -15,13 +15,13 @@ from math import isfinite
 from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, changed_values, load_scene
-from ..physics.urdf import read_urdf
+from ..physics.urdf.read import read_urdf
 from ..physics.simulator import Simulator
-from .command_input import CommandInput
-from .commands import CommandIntake, RateLimitedLog
+from .commands.callbacks import CommandInput
+from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
-from .parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
-from .rebuild import build_simulator, change_live
+from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
+from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
 from .status import Interval, health, status_line
 

@@ -46,10 +46,10 @@ def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held:
         # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.
         ("substeps_per_step", str(sim.substeps)),
         ("substeps_taken", str(sim.substeps_taken)),
-        # physics/compiled.py: which code takes runs of plain steps (extra `fast`)
+        # physics/compiled/build.py: which code takes runs of plain steps (extra `fast`)
         ("compute_path", sim.path),
         ("refused_steps", str(sim.refused_steps)),
-        # physics/accuracy.py: the latest local error estimate and their sum since reset
+        # physics/trust/accuracy.py: the latest local error estimate and their sum since reset
         ("error_estimate", f"{sim.error_estimate:.3e}"),
         ("accumulated_error", f"{sim.accumulated_error:.3e}"),
         # Friction, limits and clamps switched inside steps, by kind (none without them).

@@ -20,9 +20,9 @@ from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
 from ..usage import ArgumentParser, UsageError, one_line
-from .parameters import PARAMETERS, ParameterRefused, when_changed
-from .ros_args import (LOG_LEVELS, load_params_file, node_identity,  # noqa: F401
-                       node_parameters, parse_ros_args, split_ros_args)
+from .params.parameters import PARAMETERS, ParameterRefused, when_changed
+from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
+                              node_parameters, parse_ros_args, split_ros_args)  # noqa: F401
 
 LEVELS = dict(zip(LOG_LEVELS, (logging.DEBUG, logging.INFO, logging.WARNING, logging.WARNING,
                                logging.ERROR, logging.CRITICAL)))
@@ -64,7 +64,7 @@ class Stop:
 
 
 def run_dds(ros_argv: list, duration: float | None, status, stop=None) -> int:
-    from .messages import close_domains
+    from .wire.messages import close_domains
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
@@ -86,7 +86,7 @@ ROS_TYPES = {"float": "double", "str": "string", "bool": "bool", "float_pair": "
 
 def parameter_help() -> str:
     """Every parameter from the one table: ROS type, default (scene release) and meaning."""
-    from .parameters import scene_defaults
+    from .params.parameters import scene_defaults
 
     defaults = scene_defaults("release")
     lines = ["parameters (--ros-args -p NAME:=VALUE, or --params-file FILE with "

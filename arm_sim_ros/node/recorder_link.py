@@ -8,7 +8,7 @@ recording shows how far the steps may be off and what they cost. The node's stor
 with the steps, one row per tick (recorders with `node_ticks`): the commands refused during
 the tick, whether it came late, the real-time factor and its sub-steps (those of its
 steps): a tuple per tick here, the numbers worked out in the recorder's sender thread
-(recording/story.py). The recorder learns the stamp origin (`for_node`) so that its
+(recording/rrd/story.py). The recorder learns the stamp origin (`for_node`) so that its
 ros_time timeline is the JointState stamps.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ def make_recorder(config, log, stream=None):
         return None
     v = config.values
     try:
-        from ..recording.telemetry import make_recorder as make  # heavy (rerun); only when asked
+        from ..recording.rrd.telemetry import make_recorder as make  # heavy (rerun); only when asked
         return make(config.scene, path=v["rerun_path"] or None, spawn=v["rerun_spawn"],
                     connect=v["rerun_connect"] or None, warn=log.warning, stream=stream)
     except Exception as error:  # telemetry must never stop the simulation

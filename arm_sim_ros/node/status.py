@@ -27,7 +27,7 @@ class Interval:
 
 def health(held: bool, new_refused: int, new_late: int, books=None) -> tuple[int, str]:
     """(diagnostic level, message) over the interval since the previous status; `books`:
-    why the energy books do not close (physics/guard.py), an error until reset."""
+    why the energy books do not close (physics/trust/guard.py), an error until reset."""
     if held:
         return ERROR, "integration not finite: holding the last finite state"
     if books:

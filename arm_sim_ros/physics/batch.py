@@ -15,10 +15,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import compiled, stability
+from .compiled import build as compiled
+from .stepping import stability
 from .dynamics import build_dynamics
 from .effects import Damping, Gravity
-from .integrators import INTEGRATORS, step_for
+from .stepping.integrators import INTEGRATORS, step_for
 from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
 from .simulator import Simulator
@@ -72,7 +73,7 @@ class Batch:
         switching = [name for name in ("friction", "joint_limits") if getattr(scene, name)]
         if switching:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
-                             "are located arm by arm (physics/events.py); run such a scene "
+                             "are located arm by arm (physics/switching/events.py); run such a scene "
                              "one arm at a time (arm-sim run)")
         if (scene.servo or {}).get("rate"):     # its samples are taken arm by arm
             raise SceneError("batch rollouts cannot run a discrete servo (servo.rate); arm-sim run")

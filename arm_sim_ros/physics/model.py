@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from math import cos, isfinite, sin
 
 PAIR_FIELDS = ("link_lengths", "link_masses", "com_distances", "com_inertias")
+MAX_ANGLE = 1e6   # rad: beyond it sin and cos keep no digit of an angle; nothing physical goes there
 
 
 class ParameterError(ValueError):

@@ -13,14 +13,13 @@ from math import inf, isfinite, pi, radians
 from pathlib import Path
 
 from .. import yaml_files
-from .accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
+from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
-from .integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
-from .model import PAIR_FIELDS, ArmParameters, ParameterError, brief
+from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
+from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
-MAX_INITIAL_ANGLE = 1e6   # rad
 # Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
 ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
               "joint_limits.upper")
@@ -68,10 +67,9 @@ class Scene:
         for f in fields(self):
             object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
                                                           getattr(self, f.name)))
-        # Beyond this sin/cos keep no digit of an angle; nothing physical starts there.
-        if max(abs(v) for v in self.initial_positions) > MAX_INITIAL_ANGLE:
+        if max(abs(v) for v in self.initial_positions) > MAX_ANGLE:
             raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
-                             f"{MAX_INITIAL_ANGLE:g} rad in magnitude")
+                             f"{MAX_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:

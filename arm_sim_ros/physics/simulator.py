@@ -16,13 +16,16 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from math import isfinite, nan
 
-from . import accuracy, compiled, guard, model, stability
-from .events import switching as switching_for
+from .trust import accuracy, guard
+from .compiled import build as compiled
+from . import model
+from .stepping import stability
+from .switching.events import switching as switching_for
 from .dynamics import build_dynamics
 from .effects import servo
-from .integrators import INTEGRATORS, step_for
+from .stepping.integrators import INTEGRATORS, step_for
 from .scene import Scene
-from .switch_run import Switched
+from .compiled.switch_run import Switched
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 
@@ -348,6 +351,6 @@ def sample(sim: Simulator) -> Sample:
 
 def check_divergence(sim: Simulator) -> None:
     """The divergence check Simulator.run ends with (a run stopped early ends with it too:
-    tools/whole_steps.py)."""
+    tools/run/whole_steps.py)."""
     if not sim.holding:
         sim._check_divergence()

@@ -25,14 +25,14 @@ import numpy as np
 
 from ..physics import model
 from ..physics.effects import Effect
-from ..physics.integrators import INTEGRATORS
+from ..physics.stepping.integrators import INTEGRATORS
 
 # Each effect's stored energy as a part of E: the part's name in the books.
 STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
 KINDS = ("input", "loss", "transfer")
 CURRENTS = ("i1", "i2")           # the windings' extra states (A)
 COMMANDED = "joints/commanded_torque"
-# How far each step is from the exact flow (physics/accuracy.py), and what it cost.
+# How far each step is from the exact flow (physics/trust/accuracy.py), and what it cost.
 LOCAL_ERROR = "accuracy/local_error"            # the step's estimate, max over q, q̇
 ACCUMULATED_ERROR = "accuracy/accumulated_error"  # their sum since reset
 SUBSTEPS = "accuracy/substeps"                  # sub-steps the step was taken as

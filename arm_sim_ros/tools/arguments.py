@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..physics.scene import (Scene, SceneError, angle_warning, changed_values, load_scene,
                              parse_value)
-from ..physics.urdf import read_urdf
+from ..physics.urdf.read import read_urdf
 
 
 def scene_from_args(args, note=None) -> Scene:

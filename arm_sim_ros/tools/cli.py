@@ -19,19 +19,19 @@ from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
-from .confirmed import ConfirmedSteps
+from .run.confirmed import ConfirmedSteps
 from .progress import Progress
 from .signals import StopOnSignals
 
 # Modules that contribute subcommands of their own (each defines add_parser).
-SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy",     # accuracy
+SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy.command",     # accuracy
                       "arm_sim_ros.tools.batch",        # batch
                       "arm_sim_ros.tools.inspect",      # inspect
-                      "arm_sim_ros.tools.record",       # record
+                      "arm_sim_ros.tools.wire.record",       # record
                       "arm_sim_ros.tools.urdf",         # urdf
-                      "arm_sim_ros.tools.fit",          # fit
-                      "arm_sim_ros.tools.fit_excitation",  # excite
-                      "arm_sim_ros.tools.send_torque"]  # send-torque
+                      "arm_sim_ros.tools.fit.command",          # fit
+                      "arm_sim_ros.tools.fit.excitation",  # excite
+                      "arm_sim_ros.tools.wire.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:
     for name in preset_names():
@@ -41,9 +41,9 @@ def cmd_scenes(args) -> int:
 
 # Hooks other modules extend: each takes (args) and returns a recorder or None.
 RUN_RECORDERS = [lambda args: CsvRecorder(args.csv) if args.csv else None,
-                 lambda args: importlib.import_module("arm_sim_ros.tools.run_bag").run_recorder(args)
+                 lambda args: importlib.import_module("arm_sim_ros.tools.run.bag").run_recorder(args)
                  if args.bag else None,
-                 lambda args: importlib.import_module("arm_sim_ros.recording.telemetry").make_recorder(
+                 lambda args: importlib.import_module("arm_sim_ros.recording.rrd.telemetry").make_recorder(
                      path=args.rerun, spawn=args.rerun_spawn, connect=args.rerun_connect)]
 
 
@@ -61,12 +61,12 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     set by a signal) ends the run at the last whole step, even within a step
     (whole_steps.py): every recorder has then seen the same last step.
     A step reaches the recorders only once the divergence check has confirmed it; steps it
-    retracts never do (tools/confirmed.py). Returns the largest |residual| seen."""
-    from .whole_steps import WholeSteps   # the simulator's module: imported with the work
+    retracts never do (tools/run/confirmed.py). Returns the largest |residual| seen."""
+    from .run.whole_steps import WholeSteps   # the simulator's module: imported with the work
 
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    # rows are held until the divergence check confirms them (tools/confirmed.py)
+    # rows are held until the divergence check confirms them (tools/run/confirmed.py)
     steps = ConfirmedSteps(sim, each, bool(batched),
                            min((r.books_every for r in batched), default=0))
 

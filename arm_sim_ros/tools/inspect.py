@@ -31,7 +31,7 @@ def property_lines(props: dict) -> list[str]:
 
 
 def cmd_inspect(args) -> int:
-    from ..recording.readback import RecordingError, read, table  # rerun: only here
+    from ..recording.rrd.readback import RecordingError, read, table  # rerun: only here
 
     path = Path(args.recording)
     if not path.is_file():

@@ -1,4 +1,4 @@
-"""`arm-sim urdf`: the URDF of a scene's arm (physics/urdf_out.py), on stdout or to a file.
+"""`arm-sim urdf`: the URDF of a scene's arm (physics/urdf/write.py), on stdout or to a file.
 
     arm-sim urdf                                  # the default scene: urdf/two_link_arm.urdf
     arm-sim urdf --scene limit_impact -o arm.urdf
@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 
 from ..outputs import check_output, write_text
-from ..physics.urdf_out import scene_to_urdf
+from ..physics.urdf.write import scene_to_urdf
 from .arguments import add_scene_arguments, scene_from_args
 
 

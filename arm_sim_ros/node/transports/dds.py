@@ -17,14 +17,14 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from .. import messages as msg
+from ..wire import messages as msg
 from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
-from ..parameters import resolve_parameters
-from ..ros_args import remap_name
+from ..params.parameters import resolve_parameters
+from ..params.ros_args import remap_name
 from ..schedule import TickSchedule
-from ..simulation import SimulationControl
+from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
 

@@ -5,7 +5,7 @@ get_result, cancel_goal; each as dds_services.py serves a service) and two topic
 rcl_action_qos_profile_status_default). Wire type names as rosidl generates them for an
 action (`simulation_interfaces::action::dds_::SimulateSteps_SendGoal_Request_`; cancel_goal
 and status are action_msgs'), USER_DATA with their RIHS01 hashes. A get_result request is
-answered once its goal has finished. The goals themselves: node/simulate_steps.py. (No
+answered once its goal has finished. The goals themselves: node/services/simulate_steps.py. (No
 `from __future__ import annotations`: cyclonedds resolves field types at runtime.)
 """
 
@@ -20,8 +20,8 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ...interface import split_stamp
-from .. import messages as msg
-from .. import simulate_steps as steps
+from ..wire import messages as msg
+from ..services import simulate_steps as steps
 from .dds_simulation import Result as ActionResult   # simulation_interfaces/msg/Result
 
 

@@ -5,7 +5,7 @@ from cyclonedds.core import Policy
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
-from .. import messages as msg
+from ..wire import messages as msg
 
 
 class NameWatch:

@@ -19,7 +19,7 @@ from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.annotations import final
 from cyclonedds.idl.types import float64, int64, sequence, uint8, uint64
 
-from ..messages import Time
+from ..wire.messages import Time
 
 
 # --- rcl_interfaces/msg --------------------------------------------------------------------

@@ -30,10 +30,10 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ...interface import split_stamp
-from .. import messages as msg
-from .. import parameter_services as ps
-from ..ros_args import full_node_name
-from ..wire_errors import check_topic_name
+from ..wire import messages as msg
+from ..services import parameter_services as ps
+from ..params.ros_args import full_node_name
+from ..wire.errors import check_topic_name
 from . import dds_service_types as t
 from . import dds_action, dds_simulation
 from .dds_simulation import DdsSimulation

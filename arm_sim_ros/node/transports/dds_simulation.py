@@ -14,7 +14,7 @@ from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.annotations import final
 from cyclonedds.idl.types import int64, sequence, uint8, uint16, uint64
 
-from .. import simulation as sim
+from ..services import simulation as sim
 
 
 @final

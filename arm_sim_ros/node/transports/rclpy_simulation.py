@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import time
 
-from ..simulate_steps import canceled, interrupted, refusal, waiting
-from ..simulation import RESULT_OK
+from ..services.simulate_steps import canceled, interrupted, refusal, waiting
+from ..services.simulation import RESULT_OK
 
 
 def serve(node, control) -> list:

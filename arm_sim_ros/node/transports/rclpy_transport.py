@@ -22,11 +22,11 @@ from std_srvs.srv import Trigger
 from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
-from ..parameter_services import could_not_apply
-from ..parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused, resolve_parameters,
-                          scene_defaults)
+from ..services.parameter_services import could_not_apply
+from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused,
+                                 resolve_parameters, scene_defaults)
 from ..schedule import TickSchedule
-from ..simulation import SimulationControl
+from ..services.simulation import SimulationControl
 from . import rclpy_simulation
 
 

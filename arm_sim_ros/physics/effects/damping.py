@@ -2,7 +2,7 @@
 Σ dᵢ q̇ᵢ² booked as `dissipated`."""
 from __future__ import annotations
 
-from ..stability import worst_stiffness
+from ..stepping.stability import worst_stiffness
 from .base import Channel, Effect
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 from math import sqrt
 
 from ..model import ParameterError
-from ..stability import worst_stiffness
+from ..stepping.stability import worst_stiffness
 from .base import Channel, Effect, Parameter
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 from math import isfinite
 
 from ..model import ParameterError
-from ..stability import worst_stiffness
+from ..stepping.stability import worst_stiffness
 from .base import Channel, Effect, Parameter, clamp_guards, clamp_lines
 
 ELECTRICAL = ("resistance", "inductance", "torque_constant")

@@ -38,7 +38,7 @@ from fractions import Fraction
 from math import ceil, isfinite, pi, sqrt
 
 from ..model import ParameterError, mass_matrix
-from ..stability import worst_stiffness
+from ..stepping.stability import worst_stiffness
 from .actuator import Actuator
 from .base import Parameter
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from math import sqrt
 
-from ..stability import worst_stiffness
+from ..stepping.stability import worst_stiffness
 from .base import Effect, Parameter
 
 

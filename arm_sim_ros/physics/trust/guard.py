@@ -1,0 +1,68 @@
+"""Divergence and books that do not close. A state can be finite and still be nonsense: an
+unstable step (far too large for the motion) grows energy from nothing long before it
+overflows, and the energy books see it at once.
+
+The scale is the energy in play: the most energy the run has had in motion (E above the
+lowest energy the effects can store, so where V = 0 does not matter), at the start, at
+every sound check and as the books expect it now (E(0) plus the inputs). Losses do not
+widen it: a loss the books miss is what the check is for. A residual beyond all of it
+has diverged (the last sound state is held); one beyond BOOKS_FRACTION of it means the
+books do not close (said once, the run goes on and ends in failure).
+"""
+from __future__ import annotations
+
+from ..model import MAX_ANGLE
+
+CHECK_EVERY = 64          # steps between checks: one energy evaluation each (~2 % of a step)
+BOOKS_FRACTION = 0.25     # a stable method's energy error stays within this (semi-implicit
+                          # Euler at 10 ms on release: 12 %)
+FLOOR = 1e-9              # J: rounding of an arm at rest
+
+
+def lowest_energy(sim) -> float:
+    """The least energy the effects can store: motion starts from there."""
+    return sum(effect.lowest_stored_energy(sim.arm) for effect in sim.dynamics.active)
+
+
+def in_play(sim, state) -> float:
+    """Energy set in motion, or that can be: E above the lowest the effects store."""
+    return sim.energy(state) - lowest_energy(sim)
+
+
+def scale(sim, state) -> float:
+    """The energy in play: the most seen in sound states, or the books' E(0) + inputs."""
+    inputs, _ = sim.books(state)
+    expected = sim.initial_energy - lowest_energy(sim) + abs(inputs)
+    return FLOOR + max(sim.energy_in_play, expected)
+
+
+def divergence(sim, state) -> str | None:
+    """Why `state` has diverged, or None if it is sound."""
+    residual, largest = sim.residual(state), scale(sim, state)
+    if not abs(residual) <= largest:                   # NaN too
+        return (f"diverged: the energy balance is off by {residual:.3g} J, more than the "
+                f"{largest:.3g} J in play (the step is too large for this motion: reduce "
+                "step_size)")
+    if not max(abs(state[0]), abs(state[1])) <= MAX_ANGLE:
+        return f"diverged: an angle passed {MAX_ANGLE:g} rad (reduce step_size)"
+    return None
+
+
+def books_off(sim, state) -> str | None:
+    """Why the books of a sound `state` do not close, or None if they do."""
+    residual, largest = sim.residual(state), scale(sim, state)
+    if abs(residual) <= BOOKS_FRACTION * largest:
+        return None
+    return (f"the energy books do not close: the balance is off by {residual:.3g} J, "
+            f"{abs(residual) / largest:.0%} of the {largest:.3g} J in play (an effect beyond "
+            "what this step size resolves: reduce step_size or set a tolerance)")
+
+
+def audit(sim) -> bool:
+    """After a sound check: the energy in play keeps its peak, and books that do not close
+    become the run's fault (True the first time)."""
+    sim.energy_in_play = max(sim.energy_in_play, in_play(sim, sim.state))
+    off = sim.books_fault is None and books_off(sim, sim.state)
+    if off:
+        sim.books_fault = sim.fault = f"at t = {sim.time:.6g} s {off}"
+    return bool(off)

@@ -1,0 +1,2 @@
+"""`arm-sim accuracy`: the work-precision study, its independent reference and MuJoCo peer.
+May import: physics, tools.arguments and progress."""

@@ -1,0 +1,241 @@
+"""The arm_sim node on rclpy: the dds tests' scenarios where ROS 2 Jazzy is sourced.
+
+Skips cleanly where rclpy cannot be imported. Each test has its own context and domain id,
+localhost discovery tagged with this process (concurrent runs never meet), and drives the
+node's ticks itself (its timers are cancelled), so the results do not depend on wall time.
+Expected values come from a core Simulator. The last test runs the dds transport as its own
+process and talks to it from rclpy: the two Cyclone versions must meet on the wire.
+"""
+import math
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from arm_sim_ros.node.params import parameters as node_params  # noqa: E402
+from arm_sim_ros.node.transports.rclpy_transport import ArmSimNode  # noqa: E402
+from node.node_oracle import assert_matches, expected_states  # noqa: E402
+
+TIMEOUT = 5.0
+# rmw_cyclonedds appends CYCLONEDDS_URI to its own configuration, as the dds transport does.
+DISCOVERY_TAG = (f"<CycloneDDS><Domain><Discovery><Tag>arm_sim_test_node_rclpy_{os.getpid()}"
+                 "</Tag></Discovery></Domain></CycloneDDS>")
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+@pytest.fixture
+def ros(request, monkeypatch):
+    """(make_node, peer) on a private domain; everything is shut down afterwards."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("CYCLONEDDS_URI", DISCOVERY_TAG)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=request.param)
+    executor = SingleThreadedExecutor(context=context)
+    peer = Peer(context, executor)
+    nodes = []
+
+    def make_node(clock=None, **parameters):
+        node = ArmSimNode(wall_clock=clock or FakeClock(), context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in parameters.items()])
+        node.tick_timer.cancel()          # the test drives the ticks
+        node.diagnostics_timer.cancel()
+        executor.add_node(node)
+        nodes.append(node)
+        peer.wait_matched()
+        return node
+
+    yield make_node, peer
+    for node in nodes:
+        node.destroy_node()
+    peer.node.destroy_node()
+    executor.shutdown()
+    rclpy.shutdown(context=context)
+
+
+class Peer:
+    def __init__(self, context, executor):
+        self.executor = executor
+        self.node = rclpy.create_node("peer", context=context)
+        self.commands = self.node.create_publisher(Float64MultiArray, "joint_torque_commands", 10)
+        self.joint_states, self.diagnostics = [], []
+        self.node.create_subscription(JointState, "joint_states", self.joint_states.append, 1000)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        executor.add_node(self.node)
+
+    def spin_until(self, condition):
+        deadline = time.monotonic() + TIMEOUT
+        while not condition():
+            assert time.monotonic() < deadline, "no delivery on localhost"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_matched(self):
+        self.spin_until(lambda: self.commands.get_subscription_count() > 0
+                        and self.node.count_publishers("joint_states") > 0)
+
+    def send(self, node, data):
+        """Publish one command and spin until the node's subscription callback has run."""
+        before = node.core.received_commands
+        self.commands.publish(Float64MultiArray(data=[float(v) for v in data]))
+        self.spin_until(lambda: node.core.received_commands > before)
+
+
+def run_ticks(node, peer, schedule):
+    for command in schedule:
+        if command is not None:
+            peer.send(node, command)
+        node.on_tick()
+    peer.spin_until(lambda: len(peer.joint_states) >= len(schedule))
+    return peer.joint_states
+
+
+@pytest.mark.parametrize("ros", [21], indirect=True)
+def test_joint_states_match_the_core_stepped_with_the_same_held_commands(ros):
+    make_node, peer = ros
+    node = make_node(step_size=0.001, publish_rate=100)   # an integer rate, as -p gives it
+    schedule = [(1.0, -0.5)] + [None] * 9 + [(0.0, 2.0)] + [None] * 9
+    received = run_ticks(node, peer, schedule)
+    assert_matches(received, expected_states(node.core.config.scene, schedule, 10))
+    assert list(received[0].name) == ["shoulder_joint", "elbow_joint"]
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in received]
+    assert {b - a for a, b in zip(stamps, stamps[1:])} == {10_000_000}
+
+
+@pytest.mark.parametrize("ros", [22], indirect=True)
+def test_bad_commands_are_refused_and_the_last_good_command_holds(ros):
+    make_node, peer = ros
+    node = make_node(gravity=0.0)
+    good = (1.0, 0.5)
+    received = run_ticks(node, peer, [good, [math.nan, 0.0], [1.0], [0.0, math.inf], [99.0, 0.0]])
+    assert node.core.refused_commands == 4
+    assert_matches(received, expected_states(node.core.config.scene, [good] + [None] * 4, 1))
+
+
+@pytest.mark.parametrize("ros", [23], indirect=True)
+def test_command_timeout_drops_torque_to_zero(ros):
+    make_node, peer = ros
+    node = make_node(gravity=0.0, command_timeout=0.05)
+    received = run_ticks(node, peer, [(2.0, 0.0)] + [None] * 9)
+    assert [list(m.effort) for m in received] == [[2.0, 0.0]] * 5 + [[0.0, 0.0]] * 5
+    assert node.core.command_timeouts == 1
+
+
+@pytest.mark.parametrize("ros", [24], indirect=True)
+def test_parameter_callback_refuses_bad_values_and_keeps_the_old_ones(ros):
+    make_node, _ = ros
+    node = make_node()
+    for name, value in (("damping", -1.0), ("publish_rate", 33.0), ("joint_names", ["a"])):
+        result, = node.set_parameters([Parameter(name, value=value)])
+        assert not result.successful and name in result.reason
+    assert node.get_parameter("damping").value == 0.0
+    assert node.core.config.values["publish_rate"] == 100.0
+    result, = node.set_parameters([Parameter("torque_limit", value=10.0)])
+    assert result.successful and node.core.config.values["torque_limit"] == 10.0
+
+
+@pytest.mark.parametrize("ros", [25], indirect=True)
+def test_start_with_a_bad_parameter_is_refused(ros):
+    make_node, _ = ros
+    with pytest.raises(node_params.ParameterRefused, match="publish_rate"):
+        make_node(publish_rate=33.0)
+
+
+@pytest.mark.parametrize("ros", [26], indirect=True)
+def test_diagnostics_and_reset_service(ros):
+    make_node, peer = ros
+    clock = FakeClock()
+    node = make_node(clock)
+    for k in range(50):
+        clock.now = 100.0 + 0.01 * k
+        node.on_tick()
+    peer.send(node, [math.nan, 0.0])
+    clock.now = 101.0
+    node.on_diagnostics()
+    peer.spin_until(lambda: peer.diagnostics)
+    status, = peer.diagnostics[0].status
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.WARN and values["refused_commands"] == "1"
+    assert float(values["real_time_factor"]) == pytest.approx(0.5)
+
+    client = peer.node.create_client(Trigger, "/arm_sim/reset")
+    assert client.wait_for_service(timeout_sec=TIMEOUT)
+    future = client.call_async(Trigger.Request())
+    peer.spin_until(future.done)
+    assert future.result().success and node.core.sim.steps == 0
+
+
+def test_a_dds_transport_node_started_first_is_found_by_a_later_rclpy_peer(monkeypatch):
+    """`arm_sim_node --transport dds` already running when a ROS 2 node starts, as in
+    `ros2 topic echo /joint_states`: the peer sees /arm_sim, its JointStates and its reply to a
+    torque command. (Cyclone 11 once ignored the late rmw peer's announcement on 127.0.0.1.)"""
+    env = dict(os.environ, ROS_DOMAIN_ID="27", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               CYCLONEDDS_URI=DISCOVERY_TAG)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--duration", "60",
+         "--quiet", "--ros-args", "-p", "gravity:=0.0"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "scene release started" in process.stderr.readline()   # its endpoints exist
+        for name in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI"):
+            monkeypatch.setenv(name, env[name])
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=27)
+        executor = SingleThreadedExecutor(context=context)
+        try:
+            peer = Peer(context, executor)
+            peer.spin_until(lambda: peer.joint_states and ("arm_sim", "/")
+                            in peer.node.get_node_names_and_namespaces())   # ros2 node list
+            assert list(peer.joint_states[0].name) == ["shoulder_joint", "elbow_joint"]
+
+            def pushed():
+                peer.commands.publish(Float64MultiArray(data=[1.0, 0.0]))
+                return list(peer.joint_states[-1].effort) == [1.0, 0.0]
+            peer.spin_until(pushed)
+            peer.node.destroy_node()
+        finally:
+            executor.shutdown()
+            rclpy.shutdown(context=context)
+        process.terminate()                    # SIGTERM ends the node as Ctrl-C does
+        _, err = process.communicate(timeout=TIMEOUT)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    assert "torque command [1.0, 0.0] N m" in err and "refused" not in err
+
+
+@pytest.mark.parametrize("ros", [29], indirect=True)
+def test_a_set_the_core_cannot_apply_is_refused_and_the_node_goes_on(ros, monkeypatch):
+    """A rebuild that raises (here an overflow, as a payload of 1e200 kg far out on the arm
+    once did) is answered as refused, as on dds, instead of ending the node through spin."""
+    make_node, peer = ros
+    node = make_node()
+
+    def overflow(changes):
+        raise OverflowError(34, "Numerical result out of range")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(node.core, "set_parameters", overflow)
+        result = node.set_parameters([Parameter("damping", value=0.3)])[0]
+    assert not result.successful
+    assert result.reason == ("parameters damping refused: the node could not apply them "
+                             "(OverflowError); nothing changed")
+    assert node.set_parameters([Parameter("damping", value=0.3)])[0].successful
+    node.on_tick()
+    peer.spin_until(lambda: peer.joint_states)

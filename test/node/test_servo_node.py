@@ -1,0 +1,128 @@
+"""Position and velocity commands on the node core: JointState fields by joint interface,
+the set-point topics, the interface switched live, and the timeout on every interface."""
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+
+NAMES = ["shoulder_joint", "elbow_joint"]
+
+
+def make_core(**overrides):
+    return ArmSimCore(resolve_parameters({"scene": "servo_hold"} | overrides),
+                      logging.getLogger("test_servo_node"), wall_clock=lambda: 0.0,
+                      start_stamp_ns=0)
+
+
+def ticks(core, n):
+    for _ in range(n):
+        state = core.tick(0.0)
+    return state
+
+
+def test_the_servo_scene_starts_held_at_its_initial_pose():
+    state = ticks(make_core(), 100)
+    assert state.position == pytest.approx([0.3, 0.6], abs=1e-9)
+
+
+def test_a_joint_state_position_command_brings_each_joint_within_a_milliradian():
+    core = make_core(command_timeout=0.0)
+    assert core.on_joint_state_command(NAMES[::-1], [-0.4, 0.9], [], []) is None   # by name
+    state = ticks(core, 300)
+    assert state.position == pytest.approx([0.9, -0.4], abs=1e-3)
+    assert core.refused_commands == 0
+
+
+def test_a_velocity_command_holds_the_joint_velocity_in_steady_state():
+    core = make_core(**{"servo.interface": ["velocity", "position"], "servo.kd": [0.0, 15.0],
+                        "servo.kp": [50.0, 100.0]}, command_timeout=0.0)
+    assert core.on_setpoint_command("velocity", [0.8, float("nan")]) is None
+    ticks(core, 200)
+    worst = max(abs(ticks(core, 1).velocity[0] - 0.8) for _ in range(200))
+    assert worst < 1e-3
+
+
+def test_position_commands_topic_sets_the_position_set_points():
+    core = make_core(command_timeout=0.0)
+    assert core.on_setpoint_command("position", [0.1, float("nan")]) is None   # NaN: unset
+    state = ticks(core, 300)
+    assert state.position == pytest.approx([0.1, 0.6], abs=1e-3)
+
+
+@pytest.mark.parametrize("fields, interface, reason", [
+    (([], [], [1.0, 1.0]), ["position", "position"], "shoulder_joint is a position joint: it "
+                                                      "does not take effort"),
+    (([0.2, 0.2], [], []), ["effort", "position"], "shoulder_joint takes effort only"),
+    (([0.2, 0.2], [], []), ["velocity", "position"], "is a velocity joint: it does not take "
+                                                      "position"),
+    (([0.2], [], []), ["position", "position"], "2 names but 1 positions"),
+])
+def test_a_field_the_joints_interface_does_not_take_is_refused_in_one_line(fields, interface,
+                                                                          reason, caplog):
+    core = make_core(**{"servo.interface": interface, "servo.kd": [0.0, 15.0]})
+    with caplog.at_level(logging.WARNING):
+        for _ in range(5):
+            assert reason in core.on_joint_state_command(NAMES, *fields)
+    assert core.refused_commands == 5
+    assert len([r for r in caplog.records if "refused" in r.getMessage()]) == 1   # rate-limited
+
+
+def test_a_set_point_array_for_a_joint_that_does_not_take_it_is_refused():
+    core = make_core(**{"servo.interface": ["effort", "position"]})
+    assert "joint 1 takes effort only" in core.on_setpoint_command("position", [0.1, 0.2])
+    assert "expected 2" in core.on_setpoint_command("velocity", [0.1])
+    assert "beyond" in core.on_setpoint_command("position", [float("inf"), 0.2])
+
+
+def test_switching_a_joints_interface_live_is_bumpless():
+    core = make_core(command_timeout=0.0)
+    core.on_joint_state_command(NAMES, [0.5, 0.2], [], [])
+    ticks(core, 20)                                    # moving toward it
+    before = core.sim.joint_torque()
+    assert core.set_parameters({"servo.interface": ["effort", "position"]}) == ["servo.interface"]
+    assert core.sim.joint_torque() == pytest.approx(before, abs=1e-9)
+    assert core.config.values["servo.interface"] == ["effort", "position"]
+    # back to position: set-point is where the joint is now, the torque continuous
+    q = core.sim.state[0]
+    before = core.sim.joint_torque()
+    core.set_parameters({"servo.interface": ["position", "position"]})
+    assert core.sim.joint_torque() == pytest.approx(before, abs=1e-9)
+    assert ticks(core, 1).position[0] == pytest.approx(q, abs=0.02)
+
+
+def test_an_unknown_interface_is_refused_and_nothing_changes():
+    core = make_core()
+    with pytest.raises(ParameterRefused, match="servo.interface"):
+        core.set_parameters({"servo.interface": ["torque", "position"]})
+    assert core.config.values["servo.interface"] == ["position", "position"]
+
+
+def test_no_command_is_held_forever_a_timed_out_set_point_holds_where_the_arm_is(caplog):
+    core = make_core(command_timeout=0.1)
+    core.on_setpoint_command("velocity", [0.5, float("nan")])   # position joints take it
+    with caplog.at_level(logging.WARNING):
+        ticks(core, 10)                                # 0.1 s: times out
+        q = core.sim.state[0]
+        state = ticks(core, 200)
+    assert core.command_timeouts == 1
+    assert [r for r in caplog.records if "servos hold where they are" in r.getMessage()]
+    assert abs(state.velocity[0]) < 1e-3 and abs(state.position[0] - q) < 0.05
+
+
+def test_a_servo_rate_set_live_samples_the_commands_and_a_bad_one_is_refused():
+    core = make_core(command_timeout=0.0)
+    core.on_joint_state_command(NAMES, [0.8, -0.2], [], [])
+    ticks(core, 10)
+    before = core.sim.joint_torque()
+    assert core.set_parameters({"servo.rate": 1000.0}) == ["servo.rate"]   # every step
+    assert core.sim.joint_torque() == pytest.approx(before, abs=1e-9)   # bumpless
+    assert core.sim.sampled is not None
+    state = ticks(core, 300)
+    assert state.position == pytest.approx([0.8, -0.2], abs=1e-3)
+    with pytest.raises(ParameterRefused, match="servo.rate = 1e.06 Hz samples 1000 times"):
+        core.set_parameters({"servo.rate": 1e6})
+    assert core.config.values["servo.rate"] == 1000.0

@@ -1,0 +1,173 @@
+"""Issue 22: accuracy control you can trust, at the price it should cost.
+
+The sub-step count follows the error estimate both ways (a PI step-size controller on the
+sub-step, physics/trust/accuracy.py), the stability plan is its floor, `max_substeps` its
+ceiling (said once when the tolerance cannot be met), and the divergence guard is scaled
+by the energy in play, not by where V = 0 (physics/trust/guard.py).
+"""
+import pytest
+
+from arm_sim_ros.physics.trust import guard
+from arm_sim_ros.physics.trust.accuracy import DEFAULT_MAX_SUBSTEPS
+from arm_sim_ros.physics.trust.controller import proposed
+from arm_sim_ros.physics.scene import Scene, SceneError, load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.tools import cli
+
+
+def counts_over(sim, duration):
+    """The free-motion sub-step count after every step."""
+    counts = []
+    sim.run(duration, lambda s: counts.append(s.accuracy.substeps))
+    return counts
+
+
+def test_the_controller_asks_for_fewer_sub_steps_when_the_error_falls_well_below():
+    # order 4: a step measured at 1/16 of the aim could take sub-steps twice as long; the
+    # controller's integral gain (0.7) moves 16^(0.7/4) = 1.62x of the way: 8 -> ceil(4.9)
+    assert proposed(8, 1.0 / 16.0, 1.0 / 16.0, 4, 1, 1000) == 5
+    assert proposed(8, 4.0, 4.0, 4, 1, 1000) > 8          # and more when it rises
+    assert proposed(8, 1e-9, 1e-9, 4, 1, 1000) == 4       # growth of a sub-step bounded: 2x
+    assert proposed(8, 1e-9, 1e-9, 4, 6, 1000) == 6       # never under the floor
+    assert proposed(8, 1e9, 1e9, 4, 1, 50) == 50          # never over the cap
+    assert proposed(8, 0.8, 0.8, 4, 1, 1000) == 8         # no dithering near the aim
+
+
+def test_sub_steps_come_back_down_when_a_fast_motion_slows():
+    """A 100 rad/s spin braked by damping: the count the spin needs is given back."""
+    scene = Scene(initial_positions=(0.0, 0.5), initial_velocities=(100.0, 0.0), gravity=0.0,
+                  damping=0.5, step_size=0.01)
+    sim = Simulator(scene)
+    counts = counts_over(sim, 10.0)
+    assert max(counts) >= 4
+    assert counts[-1] <= max(counts) / 2
+    assert sim.substeps_taken < len(counts) * max(counts) / 2   # the ratchet would pay it all
+
+
+def test_the_stability_plan_is_a_floor_not_a_ratchet():
+    scene = load_scene("damped_release").replace(damping=500.0, step_size=0.05,
+                                                 initial_velocities=(4.0, -6.0))
+    sim = Simulator(scene)
+    assert sim.substeps > 1
+    counts = counts_over(sim, 2.0)
+    assert min(counts) >= sim.substeps
+
+
+def test_a_cap_the_tolerance_cannot_meet_is_said_once_with_the_error_reached():
+    sim = Simulator(load_scene("release").replace(tolerance=1e-9, max_substeps=3))
+    counts = counts_over(sim, 2.0)
+    assert max(counts) == 3
+    said = [e.message for e in sim.events if "not met" in e.message]
+    assert len(said) == 1
+    assert "at the cap of 3 sub-steps" in said[0] and "per s" in said[0]
+
+
+def test_max_substeps_is_a_whole_number_within_reach():
+    for bad in (0, 2.5, 1e9, -3):
+        with pytest.raises(SceneError, match="max_substeps"):
+            load_scene("release").replace(max_substeps=bad)
+    assert load_scene("release").max_substeps == DEFAULT_MAX_SUBSTEPS
+
+
+def test_a_step_that_misses_the_tolerance_is_taken_again():
+    """After a check that misses, the error the step was taken with meets the tolerance."""
+    sim = Simulator(load_scene("release").replace(tolerance=1e-7))
+    sim.run(2.0)
+    h = sim.step_size
+    assert sim.substeps_taken > 0
+    assert sim.error_estimate <= 1e-7 * h * (1 + abs(sim.state[2]) + abs(sim.state[3]))
+
+
+@pytest.mark.parametrize("name", ["stick_slip", "limit_impact", "compliant_limit"])
+def test_tightening_the_tolerance_keeps_buying_accuracy_on_switching_scenes(name):
+    """Against the same scene at h/64 and a tolerance far tighter (the independent check is
+    in the study); the error falls as the tolerance tightens."""
+    scene = load_scene(name).replace(duration=1.0)
+    fine = Simulator(scene.replace(step_size=scene.step_size / 64, tolerance=1e-10))
+    fine.run(1.0)
+    errors = []
+    for tolerance in (1e-4, 1e-6):
+        sim = Simulator(scene.replace(tolerance=tolerance))
+        sim.run(1.0)
+        errors.append(max(abs(a - b) for a, b in zip(sim.state[:4], fine.state[:4])))
+    assert errors[1] < errors[0] / 5, errors
+
+
+def test_contacts_and_free_flight_are_controlled_apart():
+    """An undamped arm bouncing on stiff compliant stops: the fine steps a contact needs
+    are not paid in the flight between contacts."""
+    scene = load_scene("compliant_limit").replace(
+        **{"joint_limits.stiffness": 1e7, "joint_limits.damping": 0.0}, step_size=0.05)
+    sim = Simulator(scene)
+    counts = counts_over(sim, 10.0)
+    assert sim.switching.substeps_for(0.05, True) >= sim.switching.contact_floor(0.05) > 100
+    assert max(counts) < 50
+    assert sim.fault is None
+
+
+def test_semi_implicit_euler_at_mujocos_step_runs_the_release_to_the_end():
+    """Stable with a bounded energy error: never called diverged (the guard's scale is the
+    energy in play, ~20 J here, not 1 + |E(0)| = 1 J because the arm starts horizontal)."""
+    sim = Simulator(load_scene("release").replace(integrator="semi_implicit_euler",
+                                                  tolerance=0.0, step_size=0.01))
+    sim.run(10.0)
+    assert sim.fault is None and sim.diverged is None
+    assert 19.0 < sim.energy_in_play < 30.0
+
+
+def test_the_guard_scale_does_not_depend_on_where_the_potential_is_zero():
+    """The same motion seen from two starting poses of equal energy above the lowest."""
+    a = Simulator(load_scene("release"))
+    b = Simulator(load_scene("release").replace(initial_positions=(3.14159265358979, 0.0)))
+    assert abs(guard.scale(a, a.state) - guard.scale(b, b.state)) < 1e-9
+    assert abs(a.energy_in_play - 2 * 9.81) < 1e-9
+
+
+def test_books_that_do_not_close_end_the_run_in_failure(capsys):
+    # explicit Euler on an undamped arm gains energy from nothing at 10 ms
+    code = cli.main(["run", "--set", "integrator=euler", "--tolerance", "0",
+                     "--duration", "10", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert err.count("energy books do not close") == 1 and "books at t" in err
+    assert '"fault": "at t = ' in out
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--tolerance", "1e-7", "--duration", "0.5"],
+    ["run", "--tolerance", "0", "--max-substeps", "5", "--duration", "0.5"],
+    ["accuracy", "--tolerance", "1e-6", "--duration", "0.2", "--integrators", "rk4",
+     "--steps", "0.01", "--tolerances", "1e-8"],
+])
+def test_tolerance_is_an_option_of_the_commands(argv, capsys):
+    assert cli.main(argv) == 0
+
+
+def test_batch_says_it_cannot_honour_a_tolerance(capsys):
+    assert cli.main(["batch", "--tolerance", "1e-6", "--count", "3"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot honour a tolerance" in err
+    assert cli.main(["batch", "--tolerance", "0", "--count", "3", "--duration", "0.05"]) == 0
+
+
+
+
+def test_the_node_reports_books_that_do_not_close_as_an_error():
+    from arm_sim_ros.interface import ERROR
+    from arm_sim_ros.node.status import health
+    sim = Simulator(load_scene("release").replace(integrator="euler", tolerance=0.0))
+    sim.run(10.0)
+    assert sim.books_fault and health(False, 0, 0, sim.books_fault) == (ERROR, sim.books_fault)
+    assert health(False, 0, 0, None)[0] != ERROR
+
+
+def test_a_contact_too_stiff_to_resolve_is_refused_at_once_not_run_for_ever():
+    """Issue 24: an engaged compliant limit with damping 1e12 asked for ~1e12 sub-steps a
+    step and never ended; past the planner's bound the step is refused, said in the
+    physics' words."""
+    scene = load_scene("compliant_limit").replace(**{"joint_limits.damping": 1e12},
+                                                  initial_positions=(1.3, 0.0))
+    sim = Simulator(scene)
+    sim.run(0.05)
+    assert sim.holding and "compliant limit is engaged" in sim.fault
+    assert sim.state[:2] == (1.3, 0.0)

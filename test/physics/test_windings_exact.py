@@ -1,0 +1,96 @@
+"""The exponential RK4 (integrator `exponential_rk4`): winding currents' decay -R/L exact.
+
+Checked against test_effects' independent FirstPrinciples (DOP853 at 1e-12 on the
+equations written from scratch): fourth order in the mechanics on the geared arm, no
+sub-steps at h = 1 ms where rk4 needs 3, and RK4 itself, bit for bit, without windings.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from arm_sim_ros.physics.stepping.integrators import compile_exponential_step, exponential_rk4, phi
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stepping.stability import exponential_radius
+
+from physics.test_effects import FirstPrinciples
+
+GEARED = load_scene("geared_arm").replace(friction=None, joint_limits=None, tolerance=0.0)
+
+
+def test_phi_functions_agree_across_the_series_switch_and_give_rk4_at_zero():
+    assert exponential_rk4(0.0) == pytest.approx((1, 1, 0.5, 0, 0.5, 0, 1, 1 / 6, 1 / 3, 1 / 3, 1 / 6),
+                                                 abs=1e-15)
+    for z in (-0.4999999, -0.5000001, -3.0):
+        e, p1, p2, p3 = phi(z)
+        assert e == pytest.approx(math.exp(z), rel=1e-15)
+        assert p1 == pytest.approx(math.expm1(z) / z, rel=1e-14)
+        assert p2 == pytest.approx((p1 - 1.0) / z, rel=1e-12)
+        assert p3 == pytest.approx((p2 - 0.5) / z, rel=1e-11)
+
+
+def test_a_winding_with_constant_drive_is_integrated_exactly_at_any_step():
+    lam, drive = 1900.0, 5000.0
+    step = compile_exponential_step(0, (lam,))
+    f = lambda q1, q2, u1, u2, x: (0.0, 0.0, drive - lam * x)
+    for h in (1e-5, 1e-3, 0.1):
+        y = step(f, (0.0, 0.0, 0.0, 0.0, 0.0), h)
+        assert y[4] == pytest.approx(drive / lam * -math.expm1(-lam * h), rel=1e-14)
+
+
+def test_without_windings_it_is_rk4_bit_for_bit():
+    scene = load_scene("release")
+    a, b = Simulator(scene), Simulator(scene.replace(integrator="exponential_rk4"))
+    a.run(0.5)
+    b.run(0.5)
+    assert a.state == b.state
+
+
+def test_geared_arm_at_1ms_is_exponential_rk4_with_no_planned_sub_steps_where_rk4_takes_three():
+    scene = load_scene("geared_arm")
+    assert scene.integrator == "exponential_rk4"
+    assert Simulator(scene).substeps == 1
+    assert Simulator(scene.replace(integrator="rk4")).substeps == 3
+
+
+def test_the_step_is_stable_where_the_plan_says_and_the_winding_stays_passive():
+    # test problem i' = -x i - w u, u' = w i: |amplification| <= 1 at the planned step
+    sim = Simulator(load_scene("geared_arm"))
+    motors = next(e for e in sim.dynamics.active if e.name == "motors")
+    for lam, p in motors.coupling(sim.arm):
+        x = sim.step_size / sim.substeps * lam
+        assert exponential_radius(x, x * x * p / (lam * lam), 0.0) <= 1.0
+    assert exponential_radius(1e4, 1.0, 0.0) <= 1.0       # L/R << h: exact decay, no growth
+
+
+def test_fourth_order_in_the_mechanics_against_the_first_principles_reference():
+    T = 0.2
+    y = FirstPrinciples(GEARED).solve(T)
+    errors = []
+    for h in (1e-3, 5e-4, 2.5e-4):
+        sim = Simulator(GEARED.replace(step_size=h))
+        assert sim.substeps == 1
+        sim.run(T)
+        errors.append(float(np.max(np.abs(np.array(sim.state[:4]) - y[:4]))))
+    orders = [math.log2(a / b) for a, b in zip(errors, errors[1:])]
+    assert min(orders) > 3.5, (errors, orders)
+    assert errors[0] < 1e-5
+
+
+
+def test_geared_arm_as_shipped_meets_its_tolerance_and_its_books_close():
+    # friction, limits and clamps located as events, default tolerance, commanded from rest;
+    # the truth: rk4 (3 sub-steps) at a tolerance 5e5 times tighter
+    scene, seconds = load_scene("geared_arm"), 0.5
+    runs = []
+    for method, tolerance in (("exponential_rk4", scene.tolerance), ("rk4", 1e-10)):
+        sim = Simulator(scene.replace(integrator=method, tolerance=tolerance))
+        sim.set_command(10.0, -4.0)
+        runs.append((sim, sim.run(seconds)))
+    (sim, largest), (truth, _) = runs
+    error = max(abs(a - b) for a, b in zip(sim.state[:4], truth.state[:4]))
+    assert error <= scene.tolerance * seconds
+    assert sim.substeps == 1 and sim.substeps_taken < sim.steps     # the tolerance splits few
+    moved = max(abs(v) for v in sim.channel_values(sim.state).values())
+    assert largest <= 1e-6 * moved, (largest, moved)

@@ -1,0 +1,164 @@
+"""scripts/run and scripts/test: this checkout's node in any shell, set-up once, then offline.
+
+The scripts are run as a user runs them. A fake venv (a python that logs `-m pip` calls and
+otherwise hands over to the real one) shows when pip would run without touching the network;
+a decoy arm_sim_node first on PATH shows that nothing from elsewhere is ever executed.
+"""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+REAL_BIN = Path(sys.executable).parent
+DOMAIN_ID = "201"   # unique in the suite: the node below runs on the dds transport
+
+
+def fake_venv(directory: Path) -> Path:
+    """bin/python: `-m pip ...` is logged to pip.log and succeeds; anything else runs the real
+    python. bin/arm_sim_node is the real venv's node (this checkout, installed editable)."""
+    bin_dir = directory / "bin"
+    bin_dir.mkdir(parents=True)
+    (bin_dir / "python").write_text(
+        "#!/bin/sh\n"
+        f'if [ "$1" = "-m" ] && [ "$2" = "pip" ]; then echo "$@" >> "{directory}/pip.log"; '
+        "exit 0; fi\n"
+        f'exec "{sys.executable}" "$@"\n')
+    (bin_dir / "arm_sim_node").write_text(
+        f'#!/bin/sh\nexec "{REAL_BIN / "arm_sim_node"}" "$@"\n')
+    for name in ("python", "arm_sim_node"):
+        (bin_dir / name).chmod(0o755)
+    return directory
+
+
+def decoy_path(directory: Path) -> str:
+    """A PATH whose first entry holds an arm_sim_node that leaves a mark if it is ever run."""
+    directory.mkdir()
+    decoy = directory / "arm_sim_node"
+    decoy.write_text(f'#!/bin/sh\ntouch "{directory}/DECOY_RAN"\nexit 127\n')
+    decoy.chmod(0o755)
+    return f"{directory}:{os.environ['PATH']}"
+
+
+def pip_calls(venv: Path) -> list:
+    log = venv / "pip.log"
+    return log.read_text().splitlines() if log.exists() else []
+
+
+def copy_of_checkout(tmp_path: Path) -> Path:
+    """scripts/ and setup.py are all the scripts read from a checkout."""
+    root = tmp_path / "checkout"
+    shutil.copytree(ROOT / "scripts", root / "scripts")
+    shutil.copy(ROOT / "setup.py", root / "setup.py")
+    return root
+
+
+def run(command, env, timeout=60):
+    return subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def test_with_ros_sourced_and_a_decoy_on_path_run_starts_this_checkouts_node(tmp_path):
+    venv = fake_venv(tmp_path / "venv")
+    env = dict(os.environ, ROS_DISTRO="jazzy", ARM_SIM_VENV=str(venv),
+               PATH=decoy_path(tmp_path / "elsewhere"), ROS_DOMAIN_ID=DOMAIN_ID,
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env.pop("PYTHONPATH", None)   # no rclpy can import: the venv's node on dds
+    recording = tmp_path / "run.rrd"
+    done = run([str(ROOT / "scripts/run"), "--duration", "0.3", "--quiet",
+                "--ros-args", "-p", f"rerun_path:={recording}"], env)
+    assert done.returncode == 0, done.stderr
+    assert not (tmp_path / "elsewhere" / "DECOY_RAN").exists()
+    named = [line for line in done.stderr.splitlines() if line.startswith("scripts/run:")]
+    assert named == [f"scripts/run: node {venv}/bin/arm_sim_node (venv {venv}, this checkout "
+                     "installed editable), transport dds"]
+    assert "scene release started" in done.stderr
+    assert recording.stat().st_size > 0
+
+
+def test_a_colcon_overlay_of_this_checkout_runs_when_ros_is_sourced(tmp_path):
+    """WS/src/arm_sim_ros with WS/install built from it: the overlay's node, never PATH's."""
+    workspace = tmp_path / "ws"
+    checkout = copy_of_checkout(workspace / "src")
+    node = workspace / "install/arm_sim_ros/lib/arm_sim_ros/arm_sim_node"
+    node.parent.mkdir(parents=True)
+    node.write_text('#!/bin/sh\necho "overlay node: $*"\n')
+    node.chmod(0o755)
+    (workspace / "install/setup.bash").write_text("export ARM_SIM_OVERLAY_SOURCED=1\n")
+    env = dict(os.environ, ROS_DISTRO="jazzy", PATH=decoy_path(tmp_path / "elsewhere"),
+               ARM_SIM_VENV=str(tmp_path / "no-venv"))
+    done = run([str(checkout / "scripts/run"), "--duration", "1"], env)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.startswith(f"scripts/run: node {node} (colcon overlay {workspace}/install)")
+    assert done.stdout.startswith("overlay node: --transport ")
+    assert done.stdout.rstrip().endswith("-- --duration 1")
+    assert not (tmp_path / "elsewhere" / "DECOY_RAN").exists()
+    assert not (tmp_path / "no-venv").exists()   # no venv made, nothing installed
+
+
+def test_an_overlay_of_another_checkout_is_not_used(tmp_path):
+    """An install/ beside a directory that is not this checkout's workspace does not count."""
+    checkout = copy_of_checkout(tmp_path / "mine")
+    other = tmp_path / "install/arm_sim_ros/lib/arm_sim_ros/arm_sim_node"   # tmp_path/install
+    other.parent.mkdir(parents=True)
+    other.write_text(f'#!/bin/sh\ntouch "{tmp_path}/OTHER_RAN"\n')
+    other.chmod(0o755)
+    venv = fake_venv(tmp_path / "venv")
+    (venv / "bin/arm_sim_node").write_text('#!/bin/sh\necho "venv node: $*"\n')
+    env = dict(os.environ, ROS_DISTRO="jazzy", ARM_SIM_VENV=str(venv))
+    done = run([str(checkout / "scripts/run"), "--transport", "dds"], env)
+    assert done.returncode == 0, done.stderr
+    assert not (tmp_path / "OTHER_RAN").exists()
+    assert f"scripts/run: node {venv}/bin/arm_sim_node" in done.stderr
+    assert "transport dds" in done.stderr
+
+
+def test_setup_runs_pip_once_and_again_only_when_setup_py_changes(tmp_path):
+    checkout = copy_of_checkout(tmp_path)
+    venv = fake_venv(tmp_path / "venv")
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    env.pop("ROS_DISTRO", None)
+
+    def test_script():
+        done = run([str(checkout / "scripts/test"), "--version"], env)
+        assert done.returncode == 0, done.stderr
+        return pip_calls(venv)
+
+    assert test_script() == [f"-m pip install -q --disable-pip-version-check -e "
+                             f"{checkout}[test,bench,fit]"]
+    assert len(test_script()) == 1                      # set up: no pip, no network
+    (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
+    assert run([str(checkout / "scripts/run")], env).returncode == 0
+    assert len(pip_calls(venv)) == 1                    # the full install serves run too
+    with open(checkout / "setup.py", "a") as setup:
+        setup.write("# a dependency changed\n")
+    assert len(test_script()) == 2                      # setup.py changed: install again
+    assert len(test_script()) == 2
+
+
+def test_a_venv_installed_from_another_checkout_is_installed_again(tmp_path):
+    """The stamp names the checkout: an editable install of another one would run its code."""
+    venv = fake_venv(tmp_path / "venv")
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    first, second = copy_of_checkout(tmp_path / "a"), copy_of_checkout(tmp_path / "b")
+    for checkout in (first, second, first):
+        assert run([str(checkout / "scripts/test"), "--version"], env).returncode == 0
+    assert [call.split()[-1] for call in pip_calls(venv)] == [
+        f"{first}[test,bench,fit]", f"{second}[test,bench,fit]", f"{first}[test,bench,fit]"]
+
+
+@pytest.mark.parametrize("script", ["run", "test"])
+def test_a_failed_first_install_says_why_and_is_not_127(tmp_path, script):
+    checkout = copy_of_checkout(tmp_path)
+    venv = tmp_path / "venv"
+    (venv / "bin").mkdir(parents=True)
+    (venv / "bin/python").write_text("#!/bin/sh\nexit 1\n")   # pip fails: offline
+    (venv / "bin/python").chmod(0o755)
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    env.pop("ROS_DISTRO", None)
+    done = run([str(checkout / "scripts" / script)], env)
+    assert done.returncode == 1
+    assert "pip could not install" in done.stderr
+    assert not list(venv.glob(".arm_sim_ros-installed*"))
