@@ -9,6 +9,7 @@ import difflib
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
+from functools import cached_property
 from math import inf, isfinite, pi, radians
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
+from .stepping.stability import unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
@@ -25,6 +27,7 @@ from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
               "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
+UNNAMED = "rk4, or exponential_rk4 where motor windings are stiff"   # integrator "" takes
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 
 
@@ -56,7 +59,7 @@ class Scene:
     friction: dict | None = None
     joint_limits: dict | None = None
     servo: dict | None = None
-    integrator: str = "rk4"
+    integrator: str = ""             # "": none named, the scene's `method` chooses one
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
@@ -85,9 +88,9 @@ class Scene:
         if self.servo is not None and self.policy not in SERVO_POLICIES:
             raise SceneError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
                              f"{self.policy!r}")
-        if self.integrator not in INTEGRATORS:
+        if self.integrator and self.integrator not in INTEGRATORS:
             raise SceneError(f"integrator {self.integrator!r} is unknown; choose one of "
-                             f"{', '.join(INTEGRATORS)}")
+                             f"{', '.join(INTEGRATORS)}, or name none (\"\": {UNNAMED})")
         for name in ("rtol", "atol"):
             if not getattr(self, name) >= 1e-14:
                 raise SceneError(f"{name} = {getattr(self, name)} must be at least 1e-14 "
@@ -139,6 +142,12 @@ class Scene:
                                  "(1/s) and frequency (rad/s), which set the step plan, are "
                                  "beyond double precision with these values; use values at a "
                                  "robot's scale")
+
+    @cached_property
+    def method(self) -> str:
+        """The integrator named, or where none is: exponential_rk4 where motor windings are
+        stiff at this step (stability.unstiff_method), else rk4."""
+        return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
     @property
     def links(self) -> ArmParameters:
@@ -299,19 +308,6 @@ def parse_value(key: str, text: str):
         raise SceneError(f"{key}={text!r} is malformed: expected "
                          f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
     return text
-
-
-def changed_values(scene: "Scene", other: "Scene") -> list[str]:
-    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
-    what a URDF replaced."""
-    def shown(value):
-        if isinstance(value, tuple):
-            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
-        if isinstance(value, dict):
-            return "{" + ", ".join(value) + "}"
-        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
-    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
-            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]
 
 
 def angle_warning(scene: "Scene", node: bool = False) -> str | None:

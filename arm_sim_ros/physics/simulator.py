@@ -80,7 +80,7 @@ class Sample:
 class Simulator:
     def __init__(self, scene: Scene):
         self.scene, self.step_size, self._tableau = scene, scene.step_size, INTEGRATORS[
-            scene.integrator]
+            scene.method]
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
         self.steps = 0

@@ -182,7 +182,7 @@ def format_result(scene: Scene, r: dict) -> str:
     others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
               if name not in ("work", "dissipated")]
     return "\n".join([
-        f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.integrator}",
+        f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.method}",
         f"t = {r['t']:.6f} s",
         f"q = {pair(r['q'])} rad",
         f"qd = {pair(r['qd'])} rad/s",

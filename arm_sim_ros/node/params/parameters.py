@@ -14,7 +14,8 @@ from ...physics.urdf import read as urdf
 from ...physics.model import BRIEF, ParameterError, brief
 from .recording_targets import rerun_path_problem, viewer_address_problem
 from ...usage import one_line
-from ...physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
+from ...physics.scene import (FIELD_KINDS, UNNAMED, Scene, SceneError, coerce_value,
+                              load_scene)
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
@@ -140,7 +141,8 @@ PARAMETERS = (
     _scene_spec("link_masses", "float_pair", "[m1, m2] kg"),
     _scene_spec("com_distances", "float_pair", "[r1, r2] m, joint to centre of mass"),
     _scene_spec("com_inertias", "float_pair", "[I1, I2] kg m^2 about each centre of mass"),
-    _scene_spec("integrator", "str", "Runge-Kutta method (rk4 default)"),
+    _scene_spec("integrator", "str", "Runge-Kutta method (\"\": none named, the default: "
+                f"{UNNAMED})"),
     _scene_spec("rtol", "float", "relative error tolerance of integrator dopri5"),
     _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
     _scene_spec("tolerance", "float", "local error per simulated second a fixed step may "

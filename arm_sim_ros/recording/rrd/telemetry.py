@@ -347,7 +347,7 @@ def start_line(sim) -> str:
                 else ", no error estimate: the simulator does not estimate these steps")
     return (f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
             f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
-            f"{sim.scene.integrator}, {held_by(sim.scene)}{estimate}, "
+            f"{sim.scene.method}, {held_by(sim.scene)}{estimate}, "
             f"E0 = {sim.initial_energy:.9g} J")
 
 

@@ -245,10 +245,10 @@ def measure_simulator(scene: Scene, times, ref, repeat: int = 1, kind: str = "as
 
     best = fastest_cpu(run, repeat)
     state_error, drift = errors(sim, samples, ref)
-    adaptive = INTEGRATORS[scene.integrator].adaptive
-    return Run(scene.integrator, scene.step_size, scene.rtol if adaptive else scene.tolerance,
+    adaptive = INTEGRATORS[scene.method].adaptive
+    return Run(scene.method, scene.step_size, scene.rtol if adaptive else scene.tolerance,
                state_error, drift, residual, None, per_simulated_second(best, times),
-               scene.integrator + SERIES[kind], substeps, kind)
+               scene.method + SERIES[kind], substeps, kind)
 
 
 def measure_mujoco(scene: Scene, integrator: str, step_size: float, times, ref,
