@@ -12,6 +12,7 @@ import os
 import sys
 import time
 
+from ..physics.compiled import cache as compile_cache
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..physics.trust.unestimated import ESTIMATES
@@ -224,6 +225,9 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv=None) -> int:
+    if sys.stderr.isatty() and not compile_cache.listeners:   # a person waits: say a compile
+        compile_cache.listeners.append(lambda line: print(f"arm-sim: {line}", file=sys.stderr,
+                                                          flush=True))
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)

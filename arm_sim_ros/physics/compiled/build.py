@@ -15,7 +15,8 @@ its steps in which nothing can switch (switch_kernel.py, switch_run.py).
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit
 (test_compiled.py). numba caches the machine code next to the module file
-(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine.
+(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine, shared by
+every checkout and venv (cache.py).
 Without numba (or with ARM_SIM_COMPILED=0) nothing here is used.
 """
 from __future__ import annotations
@@ -29,6 +30,7 @@ import sys
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
+from . import cache
 from ..stepping import integrators
 from .kernels import KERNELS
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
@@ -38,6 +40,9 @@ try:                      # the optional extra: pip install -e '.[fast]'
     import numba
 except ImportError:       # pragma: no cover - exercised where numba is absent
     numba = None
+if numba is not None:     # a first compile says so, and is timed (cache.py)
+    from numba.core import event as numba_event
+    cache.watch(numba_event)
 
 # Energy each effect stores (effects' stored_energy, the same operations in the same order:
 # squares as products, since Python's x ** 2 is libm's pow, 1 ulp off numba's x * x in about
