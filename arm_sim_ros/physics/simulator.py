@@ -6,7 +6,8 @@ cannot make it skip or drift.
 At the stability limit (stability.py) a step is split into equal sub-steps, and a step
 that would leave the finite numbers is refused: the last finite state is kept and
 `fault` says why; so is every step after a state that diverged while finite (guard.py:
-energy from nothing), until reset. Both are reported in `events`. A motor driver asked for more than its
+energy from nothing, checked at every state as it is made), until reset. Both are
+reported in `events`. A motor driver asked for more than its
 voltage limit (checked at the state each step ends in) is counted in `saturated_steps`
 and reported once, the first time, as a `saturation` event.
 """
@@ -77,7 +78,33 @@ class Sample:
                 "channels": dict(self.channels), "residual": self.residual}
 
 
+class Settled:
+    """A simulator attribute the compiled kernel may hold ahead of Python's objects (between
+    its calls the books stay in its arrays: compiled/runs.py): settled before it is read."""
+
+    def __set_name__(self, owner, name):
+        self.key = f"_settled{name}"
+
+    def __get__(self, sim, owner=None):
+        if sim is None:
+            return self
+        kernel = sim.__dict__.get("kernel")
+        if kernel is not None and kernel.held is not None:
+            kernel.settle(sim)
+        try:
+            return sim.__dict__[self.key]
+        except KeyError:
+            raise AttributeError(self.key) from None
+
+    def __set__(self, sim, value):
+        sim.__dict__[self.key] = value
+
+
 class Simulator:
+    # the error books, the energy in play and the latest sound state (guard.py): a compiled
+    # kernel holds them between its calls
+    accuracy, energy_in_play, _sound = Settled(), Settled(), Settled()
+
     def __init__(self, scene: Scene):
         self.scene, self.step_size, self._tableau = scene, scene.step_size, INTEGRATORS[
             scene.method]
@@ -109,6 +136,7 @@ class Simulator:
         steppers(self, scene)   # switches located, compiled steps, error books
 
     def reset(self) -> None:
+        settle(self, keep=False)     # what a compiled kernel held is of the run before
         s = self.scene
         self.state = ((*s.initial_positions, *s.initial_velocities)
                       + (0.0,) * (len(self.extra) + len(self.channels)))
@@ -121,6 +149,7 @@ class Simulator:
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
         self._sound = self.state     # the latest state the divergence check found sound
+        self._checked = (None, 0.0)  # (the latest state checked, its residual)
         self.energy_in_play = guard.in_play(self, self.state)   # the most seen (guard.py)
         self.books_fault = None      # why the energy books do not close, said once
         self.switch_events = self.switching.reset() if self.switching else Counter()  # by kind
@@ -140,6 +169,7 @@ class Simulator:
     def set_payload(self, mass: float) -> None:
         """Grasp (M(q) q̇ kept: an inelastic grasp of a mass at rest) or release (q̇ kept) a
         payload now; the energy that changes hands is booked in `payload_exchange`."""
+        settle(self)
         before, old, q, qd = self.energy(self.state), self.scene, self.state[0:2], self.state[2:4]
         self.change_scene(old.replace(payload={"mass": mass}))
         if mass > (old.payload or {"mass": 0.0})["mass"]:
@@ -152,6 +182,7 @@ class Simulator:
 
     def change_scene(self, scene: Scene) -> None:
         """From the next step, `scene`'s effects; time, state and books kept (step size too)."""
+        settle(self)
         carried, was = dict(zip(self.state_names, self.state)), self.books(self.state)
         self._build(scene, self.dynamics.command)
         self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
@@ -173,15 +204,16 @@ class Simulator:
         return self.accuracy.accumulated()
 
     @property
-    def confirmed(self) -> bool:      # the state now found sound: earlier ones are final
-        return self.state is self._sound
-
-    @property
     def holding(self) -> bool:
         """True while the latest step was refused and the state is the last finite one."""
         return self.refused_steps > 0 and self._refused_step == self.steps - 1
 
     def step(self) -> None:
+        """One step: in one compiled call where it can be (compiled/runs.py), else here."""
+        if self.kernel is None or not self.kernel.step(self):
+            self.step_in_python()
+
+    def step_in_python(self) -> None:
         if self.diverged:                 # held until reset: what follows would be nonsense
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
@@ -201,7 +233,7 @@ class Simulator:
                 self._refuse("would make " + ", ".join(
                     f"{n} = {v}" for n, v in zip(self.state_names, y) if not isfinite(v)))
         self.steps += 1
-        if self.steps % guard.CHECK_EVERY == 0 and not self.holding:
+        if not self.holding:
             self._check_divergence()
         over = self._driver is not None and not self.holding and self._driver(self.state)
         if over:       # the driver was asked for more than its voltage limit: say so once
@@ -211,10 +243,11 @@ class Simulator:
 
     def _check_divergence(self) -> None:
         """A diverged state (guard.py) gives way to the last sound one, held until reset."""
-        why = guard.divergence(self, self.state)
+        residual = self.residual()
+        why = guard.divergence(self, self.state, residual)
         if why is None:
-            self._sound = self.state
-            if guard.audit(self):              # books that do not close: said once
+            self._sound, self._checked = self.state, (self.state, residual)
+            if guard.audit(self, residual):    # books that do not close: said once
                 self._emit("books", self.books_fault)
         else:                             # the step just counted is refused after all
             self.state, self.diverged = self._sound, why
@@ -270,11 +303,11 @@ class Simulator:
             taken, largest = self.kernel.run(self, left, largest) if fast else (1, largest)
             if not fast:
                 self.step()
-                largest = max(largest, abs(self.residual()))
+                checked, residual = self._checked     # the check's, for a state it made
+                largest = max(largest, abs(residual if checked is self.state else
+                                           self.residual()))
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
-        if steps and not self.holding and not self.confirmed:
-            self._check_divergence()          # a short run must not end on nonsense either
         return largest
 
 
@@ -286,7 +319,7 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     sim.dynamics.command[0] = tau1
     sim.dynamics.command[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
-    if commanded(sim) != before:
+    if commanded(sim) != before and not (sim.kernel is not None and sim.kernel.commanded(sim)):
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
 
 
@@ -296,9 +329,18 @@ def commanded(sim: Simulator) -> tuple:
     return (*sim.dynamics.command, *(joint_servo.setpoint if joint_servo is not None else ()))
 
 
+def settle(sim: Simulator, keep: bool = True) -> None:
+    """What a compiled kernel holds back into the simulator's objects; `keep` False: forgotten
+    (they were put back, or are reset)."""
+    kernel = getattr(sim, "kernel", None)
+    if kernel is not None:
+        kernel.settle(sim) if keep else kernel.drop()
+
+
 def steppers(sim: Simulator, scene: Scene) -> None:
     """What steps the simulator: the switching stepper (friction, limits, clamps: events.py),
     the compiled step and runs (compiled.py, extra `fast`), and the error books."""
+    sim.lowest_energy = guard.lowest_energy(sim)      # where the energy in play starts
     step = compiled.steps_for(sim.dynamics, sim._step)
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
@@ -349,8 +391,3 @@ def sample(sim: Simulator) -> Sample:
                   channels=channels, inputs=inputs, losses=losses)
 
 
-def check_divergence(sim: Simulator) -> None:
-    """The divergence check Simulator.run ends with (a run stopped early ends with it too:
-    tools/run/whole_steps.py)."""
-    if not sim.holding:
-        sim._check_divergence()

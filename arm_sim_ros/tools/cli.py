@@ -21,7 +21,7 @@ from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import ArgumentParser, UsageError, one_line
 from .arguments import add_scene_arguments, scene_from_args
-from .run.confirmed import ConfirmedSteps
+from .run.rows import ChunkSteps
 from .progress import Progress
 from .signals import StopOnSignals
 
@@ -61,16 +61,14 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress; `stop` (its .requested
     set by a signal) ends the run at the last whole step, even within a step
-    (whole_steps.py): every recorder has then seen the same last step.
-    A step reaches the recorders only once the divergence check has confirmed it; steps it
-    retracts never do (tools/run/confirmed.py). Returns the largest |residual| seen."""
+    (whole_steps.py): every recorder has then seen the same last step. A diverged state
+    never reaches them: every state is checked as it is made (tools/run/rows.py). Returns
+    the largest |residual| seen."""
     from .run.whole_steps import WholeSteps   # the simulator's module: imported with the work
 
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    # rows are held until the divergence check confirms them (tools/run/confirmed.py)
-    steps = ConfirmedSteps(sim, each, bool(batched),
-                           min((r.books_every for r in batched), default=0))
+    steps = ChunkSteps(each, bool(batched), min((r.books_every for r in batched), default=0))
 
     largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
     end = sim.time + duration
@@ -83,7 +81,7 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
         on_step = steps.on_step if recorders else None
         largest = max(largest, whole.run(count, on_step) if whole is not None
                       else sim.run(count * sim.step_size, on_step))
-        steps.hand_over(batched)
+        steps.hand_over(sim, batched)
         left -= count
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
             chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)

@@ -229,29 +229,29 @@ def test_a_step_abandoned_midway_leaves_the_simulator_as_the_step_before_left_it
     and shadow half done), the simulator is put back at the step before: state, books,
     counts and events as those of a run that ended there."""
     from arm_sim_ros.physics.scene import load_scene
-    from arm_sim_ros.physics.simulator import Simulator, check_divergence
+    from arm_sim_ros.physics.simulator import Simulator
     from arm_sim_ros.tools.signals import StopOnSignals
     from arm_sim_ros.tools.run.whole_steps import WholeSteps
 
     scene = load_scene("compliant_limit").replace(initial_positions=(0.1, 1.95),
                                                   initial_velocities=(0.0, 3.0))
     sim, reference = Simulator(scene), Simulator(scene)
-    real, calls, seen = sim.switching.step, [0], []
+    real, calls, seen, at = sim.switching.step, [0], [], []
 
     def sub_step(*args):                  # the switching stepper's integrator step
         calls[0] += 1
-        if calls[0] == 400:               # inside step 90, taken as 131 sub-steps
-            signal.raise_signal(signal.SIGTERM)
+        if calls[0] == 400:               # inside step 90 in pure Python, taken as 131
+            at.append(sim.steps)          # sub-steps (later where steps in one mode are
+            signal.raise_signal(signal.SIGTERM)   # compiled calls)
         return real(*args)
 
     sim.switching.step = sub_step
     with StopOnSignals() as stop:
         WholeSteps(sim, stop).run(300, lambda s: seen.append((s.steps, calls[0])))
     assert stop.requested == "SIGTERM"
-    assert sim.steps == seen[-1][0] == 90 and seen[-1][1] < 400
+    assert sim.steps == seen[-1][0] == at[0] >= 90 and seen[-1][1] < 400
     for _ in range(sim.steps):
         reference.step()
-    check_divergence(reference)
     assert sim.state == reference.state and sim.substeps_taken == reference.substeps_taken
     assert sim.error_estimate == reference.error_estimate
     assert sim.accumulated_error == reference.accumulated_error
