@@ -4,6 +4,8 @@ right-hand side met), from the modules build.py writes and loads.
 """
 from __future__ import annotations
 
+from math import isfinite
+
 from ..stepping.stability import MAX_SUBSTEPS
 from ..trust import accuracy
 from ..trust.unestimated import Off
@@ -160,7 +162,7 @@ class Steps:
         self.y[:] = y
         new = step(self.y, h, K)
         total = sum(new)
-        if total - total == 0.0:          # finite (inf - inf and NaN are NaN)
+        if total - total == 0.0 or all(isfinite(v) for v in new):   # inf - inf, NaN: NaN
             return new
         # left the doubles: Python's step, the same numbers, says how (an exception where
         # Python's cos(inf) raises, where numba's makes NaN), as on the pure-Python path
