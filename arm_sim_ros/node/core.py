@@ -159,7 +159,8 @@ class ArmSimCore(CommandInput):
         sim = self.sim
         before = (sim.state, sim.steps)
         self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
-        if sim.holding or not all(isfinite(v) for v in sim.state):
+        total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
+        if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
             self.recorder.hand_over()
