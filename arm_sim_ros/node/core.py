@@ -170,7 +170,9 @@ class ArmSimCore(CommandInput):
                            f"{sim.time:.6f} s); holding until reset")
             self.recorder.event("integration not finite: holding", "error")
             return
-        self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
+        residual = abs(sim.residual())
+        if residual > self.max_abs_residual:      # as max() keeps it, NaN included
+            self.max_abs_residual = residual
 
     def stamp_ns(self) -> int:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
