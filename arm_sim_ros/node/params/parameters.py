@@ -6,7 +6,6 @@ cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ...physics.effects import MAPPING_EFFECTS, EffortLimits
@@ -250,12 +249,12 @@ class NodeConfig:
     scene: Scene
     steps_per_tick: int
 
-    @cached_property       # read every tick; a config is never changed, only replaced
+    @property
     def tick_period(self) -> float:
         """Simulated seconds per tick."""
         return 1.0 / self.values["publish_rate"]
 
-    @cached_property
+    @property
     def wall_period(self) -> float:
         """Wall seconds between ticks; 0 when running as fast as possible."""
         rtf = self.values["real_time_factor"]
