@@ -40,7 +40,7 @@ def test_the_text_result_of_an_off_run_says_it_carries_no_error_estimate(capsys)
     assert out.splitlines()[-1] == f"error estimate: none (estimate off: {NO_ESTIMATE})"
 
 
-@pytest.mark.parametrize("argv", [["--set", "estimate=off"],
+@pytest.mark.parametrize("argv", [["--set", "estimate=off", "--set", "tolerance=1e-6"],
                                   ["--estimate", "off", "--tolerance", "1e-6"],
                                   ["--estimate", "off", "--set", "tolerance=1e-6"]])
 def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
@@ -49,9 +49,10 @@ def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
     assert err.count("\n") == 1 and "estimate off computes no error estimate" in err
 
 
-def test_estimate_off_with_tolerance_0_given_runs(capsys):
-    code, out, _ = run_cli(capsys, "run", "--duration", "0.1", "--set", "estimate=off",
-                           "--set", "tolerance=0", "--json")
+@pytest.mark.parametrize("argv", [["--set", "estimate=off"],
+                                  ["--set", "estimate=off", "--set", "tolerance=0"]])
+def test_estimate_off_alone_or_with_tolerance_0_runs(capsys, argv):
+    code, out, _ = run_cli(capsys, "run", "--duration", "0.1", *argv, "--json")
     assert code == 0 and json.loads(out)["estimate"] == "off"
 
 
@@ -92,9 +93,11 @@ def test_the_node_takes_estimate_as_a_parameter_and_its_diagnostics_say_off():
 
 def test_the_node_refuses_estimate_off_beside_a_tolerance_naming_the_parameter():
     with pytest.raises(node_params.ParameterRefused) as refused:
-        node_params.resolve_parameters({"estimate": "off"})
-    assert refused.value.name == "estimate"
+        node_params.resolve_parameters({"estimate": "off", "tolerance": 5e-05})
+    assert refused.value.name == "tolerance"          # the one to set to 0 or leave out
     assert "cannot hold tolerance = 5e-05" in refused.value.reason
+    alone = node_params.resolve_parameters({"estimate": "off"})    # off alone: no tolerance
+    assert alone.scene.estimate == "off" and alone.scene.tolerance == 0.0
     config = node_params.resolve_parameters({"scene": "damped_release"})
     assert config.with_changes({"tolerance": 0.0, "estimate": "off"}).scene.estimate == "off"
     assert load_scene("damped_release").estimate == "global"
