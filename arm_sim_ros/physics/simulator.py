@@ -27,6 +27,7 @@ from .effects import servo
 from .stepping.integrators import INTEGRATORS, step_for
 from .scene import Scene
 from .compiled.switch_run import Switched
+from .compiled.held import Settled
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 
@@ -78,31 +79,8 @@ class Sample:
                 "channels": dict(self.channels), "residual": self.residual}
 
 
-class Settled:
-    """A simulator attribute the compiled kernel may hold ahead of Python's objects (between
-    its calls the books stay in its arrays: compiled/runs.py): settled before it is read."""
-
-    def __set_name__(self, owner, name):
-        self.key = f"_settled{name}"
-
-    def __get__(self, sim, owner=None):
-        if sim is None:
-            return self
-        kernel = sim.__dict__.get("kernel")
-        if kernel is not None and kernel.held is not None:
-            kernel.settle(sim)
-        try:
-            return sim.__dict__[self.key]
-        except KeyError:
-            raise AttributeError(self.key) from None
-
-    def __set__(self, sim, value):
-        sim.__dict__[self.key] = value
-
-
 class Simulator:
-    # the error books, the energy in play and the latest sound state (guard.py): a compiled
-    # kernel holds them between its calls
+    # the error books, energy in play, latest sound state: a compiled kernel holds them
     accuracy, energy_in_play, _sound = Settled(), Settled(), Settled()
 
     def __init__(self, scene: Scene):
@@ -124,10 +102,7 @@ class Simulator:
         self._rhs = self.dynamics.function
         self._step = step_for(self._tableau, len(self.channels), self.dynamics.decay,
                               rtol=scene.rtol, atol=scene.atol)
-        first = 4 + len(self.extra)
-        kinds = self.dynamics.channel_kinds
-        self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
-        self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
+        self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
             self._tableau, self.dynamics.active, self.arm, self.step_size)
         if message:
@@ -169,7 +144,6 @@ class Simulator:
     def set_payload(self, mass: float) -> None:
         """Grasp (M(q) q̇ kept: an inelastic grasp of a mass at rest) or release (q̇ kept) a
         payload now; the energy that changes hands is booked in `payload_exchange`."""
-        settle(self)
         before, old, q, qd = self.energy(self.state), self.scene, self.state[0:2], self.state[2:4]
         self.change_scene(old.replace(payload={"mass": mass}))
         if mass > (old.payload or {"mass": 0.0})["mass"]:
@@ -235,11 +209,8 @@ class Simulator:
         self.steps += 1
         if not self.holding:
             self._check_divergence()
-        over = self._driver is not None and not self.holding and self._driver(self.state)
-        if over:       # the driver was asked for more than its voltage limit: say so once
-            self.saturated_steps += 1
-            if self.saturated_steps == 1:
-                self._emit("saturation", f"motor driver saturates: {over}")
+        if self._driver is not None and not self.holding:
+            saturation(self)
 
     def _check_divergence(self) -> None:
         """A diverged state (guard.py) gives way to the last sound one, held until reset."""
@@ -303,9 +274,7 @@ class Simulator:
             taken, largest = self.kernel.run(self, left, largest) if fast else (1, largest)
             if not fast:
                 self.step()
-                checked, residual = self._checked     # the check's, for a state it made
-                largest = max(largest, abs(residual if checked is self.state else
-                                           self.residual()))
+                largest = max(largest, abs_residual(self))   # the check's where it made it
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
         return largest
@@ -327,6 +296,30 @@ def commanded(sim: Simulator) -> tuple:
     """The command and a servo's set-points, as the step reads them."""
     joint_servo = servo.servo_of(sim.dynamics)
     return (*sim.dynamics.command, *(joint_servo.setpoint if joint_servo is not None else ()))
+
+
+def abs_residual(sim: Simulator) -> float:
+    """|sim.residual()| of the state now: the divergence check's where it made it (a
+    compiled step hands it out; the node books it every tick), else computed."""
+    checked, residual = sim._checked
+    return abs(residual) if checked is sim.state else abs(sim.residual())
+
+
+def book_entries(dynamics) -> tuple[list, list]:
+    """Where in the state the input channels are, and the loss channels."""
+    first = 4 + len(dynamics.extra)
+    return tuple([first + i for i, each in enumerate(dynamics.channel_kinds) if each == kind]
+                 for kind in ("input", "loss"))
+
+
+def saturation(sim: Simulator) -> None:
+    """A driver asked for more than its voltage limit at the state the step ended in:
+    counted, and said once."""
+    over = sim._driver(sim.state)
+    if over:
+        sim.saturated_steps += 1
+        if sim.saturated_steps == 1:
+            sim._emit("saturation", f"motor driver saturates: {over}")
 
 
 def settle(sim: Simulator, keep: bool = True) -> None:
@@ -389,5 +382,3 @@ def sample(sim: Simulator) -> Sample:
                   dissipated=channels.get("dissipated", 0.0), initial_energy=sim.initial_energy,
                   extra=dict(zip(sim.extra, y[4:4 + len(sim.extra)])),
                   channels=channels, inputs=inputs, losses=losses)
-
-

@@ -1,5 +1,6 @@
 """The simulator's state and error books in the compiled loops' arrays, and back (runs.Kernel
-holds them there between its calls).
+holds them there between its calls; Settled writes them back before a simulator's books are
+read).
 
     y   the state            z   the shadow's state     L   the shadow's local error
     O   motion - shadow      S   the state before one whose check is Python's
@@ -69,3 +70,25 @@ def unpack(kernel, sim, books, sound: int) -> None:
         shadow.shadow, shadow.offset = tuple(kernel.z.tolist()), kernel.O[:n].tolist()
         shadow.last = kernel.last
     shadow.largest, shadow.lost = float(F[5]), bool(I[15])
+
+
+class Settled:
+    """A simulator attribute the compiled kernel may hold ahead of Python's objects (between
+    its calls the books stay in its arrays: compiled/runs.py): settled before it is read."""
+
+    def __set_name__(self, owner, name):
+        self.key = f"_settled{name}"
+
+    def __get__(self, sim, owner=None):
+        if sim is None:
+            return self
+        kernel = sim.__dict__.get("kernel")
+        if kernel is not None and kernel.held is not None:
+            kernel.settle(sim)
+        try:
+            return sim.__dict__[self.key]
+        except KeyError:
+            raise AttributeError(self.key) from None
+
+    def __set__(self, sim, value):
+        sim.__dict__[self.key] = value
