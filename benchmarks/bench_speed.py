@@ -166,19 +166,20 @@ def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
 
 def step_table(repeat: int, steps: int = 2000) -> list[str]:
     """Simulator.step (the node's path) one call per step, compiled and pure Python, beside
-    mj_step called from Python and the compiled limit, h = 1 ms, interleaved, best of
-    `repeat` rounds of `steps` steps."""
-    lines = [f"Simulator.step at h = 1 ms, µs per step, {steps} steps, interleaved, best of "
-             f"{repeat}", f"{'scene':<22}{'estimate':>9} {'python':>8} {'compiled':>9} "
-             f"{'mj_step':>8} {'limit':>7} {'python/compiled':>16} {'mj_step/compiled':>17}",
-             "-" * 102]
+    Simulator.run (compiled, the same steps in one call), mj_step called from Python and the
+    compiled limit, h = 1 ms, interleaved, best of `repeat` rounds of `steps` steps."""
+    lines = [f"Simulator.step at h = 1 ms, µs per step (CPU), {steps} steps, interleaved, best "
+             f"of {repeat}", f"{'scene':<12}{'estimate':>9} {'python':>8} {'compiled':>9} "
+             f"{'run':>7} {'mj_step':>8} {'limit':>7} {'python/compiled':>16} "
+             f"{'mj_step/compiled':>17} {'compiled/run':>13}", "-" * 112]
     for name in ("release", "stick_slip"):
         for estimate in ("global", "off"):
             scene = load_scene(name).replace(step_size=0.001)
             if estimate == "off":
                 scene = scene.replace(estimate="off", tolerance=0.0)
             timed = {"python": stepped(simulator(scene, False), steps),
-                     "compiled": stepped(simulator(scene, True), steps)}
+                     "compiled": stepped(simulator(scene, True), steps),
+                     "run": ran(simulator(scene, True), steps)}
             if name == "release":
                 timed["mj_step"] = mujoco_steps(scene, steps)
             limit = time_limit(scene, steps * scene.step_size, 1)
@@ -187,14 +188,23 @@ def step_table(repeat: int, steps: int = 2000) -> list[str]:
                 for key, run in timed.items():
                     best[key] = min(best[key], fastest(run, 1))
             per = {key: best[key] / steps * 1e6 for key in best}
-            mj = per.get("mj_step")
+            mj = per.get("mj_step", math.nan)
             lines.append(
-                f"{name:<22}{estimate:>9} {per['python']:>8.2f} {per['compiled']:>9.2f} "
-                f"{mj if mj is not None else float('nan'):>8.2f} "
-                f"{limit / steps * 1e6 if limit else float('nan'):>7.3f} "
-                f"{per['python'] / per['compiled']:>15.1f}x "
-                f"{(mj / per['compiled']) if mj else float('nan'):>16.2f}x")
+                f"{name:<12}{estimate:>9} {per['python']:>8.2f} {per['compiled']:>9.2f} "
+                f"{per['run']:>7.3f} {mj:>8.2f} "
+                f"{limit / steps * 1e6 if limit else math.nan:>7.3f} "
+                f"{per['python'] / per['compiled']:>15.1f}x {mj / per['compiled']:>16.2f}x "
+                f"{per['compiled'] / per['run']:>12.1f}x")
     return lines
+
+
+def ran(sim, steps: int):
+    """Simulator.run over `steps` steps from the scene's start, one compiled call (warmed)."""
+    def run():
+        sim.reset()
+        sim.run(steps * sim.step_size)
+    run()
+    return run
 
 
 def stepped(sim, steps: int):
@@ -343,6 +353,8 @@ def main() -> None:
     parser.add_argument("--arms", type=int, default=20000)
     parser.add_argument("--batch-steps", type=int, default=500)
     parser.add_argument("--only", help="these presets (comma-separated) alone, no other table")
+    parser.add_argument("--tables", default=",".join(TABLES),
+                        help=f"which tables, comma-separated, of {', '.join(TABLES)} (all)")
     args = parser.parse_args()
     if not compiled.available():
         sys.exit("bench_speed: numba is not installed: pip install -e '.[fast]'")
@@ -353,11 +365,18 @@ def main() -> None:
     if args.only:
         print("\n".join(presets_table(args.seconds, args.repeat, args.only.split(","))))
         return
-    for table in (step_table(max(5, args.repeat)), presets_table(args.seconds, args.repeat),
-                  unnamed_windings_table(args.seconds, args.repeat),
-                  batch_table(args.arms, args.batch_steps, args.repeat),
-                  windings_table(args.repeat)):
-        print("\n".join(table) + "\n", flush=True)
+    tables = {"step": lambda: step_table(max(5, args.repeat)),
+              "presets": lambda: presets_table(args.seconds, args.repeat),
+              "unnamed": lambda: unnamed_windings_table(args.seconds, args.repeat),
+              "batch": lambda: batch_table(args.arms, args.batch_steps, args.repeat),
+              "windings": lambda: windings_table(args.repeat)}
+    for name in args.tables.split(","):
+        if name not in tables:
+            sys.exit(f"bench_speed: no table {name!r}; choose from {', '.join(TABLES)}")
+        print("\n".join(tables[name]()) + "\n", flush=True)
+
+
+TABLES = ("step", "presets", "unnamed", "batch", "windings")
 
 
 if __name__ == "__main__":
