@@ -114,20 +114,32 @@ SMOOTH = ("release", "damped_release", "springs_oscillation", "payload_release",
 def smooth_runs(draw):
     """A smooth preset from a random state at a random tolerance (steps missed and taken
     again, counts raised and lowered), a new command before each run."""
-    scene = load_scene(draw(st.sampled_from(SMOOTH)))
-    speed = 1.0 if scene.step_size < 0.005 else 6.0
-    scene = scene.replace(
-        policy="command_gravity_compensation",
-        initial_positions=tuple(draw(st.floats(-1.5, 1.5)) for _ in (0, 1)),
-        initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
-        tolerance=draw(st.sampled_from([0.0, 1e-9, 1e-7, 5e-5, 1e-3])))
+    scene = drawn_start(draw, load_scene(draw(st.sampled_from(SMOOTH))),
+                        [0.0, 1e-9, 1e-7, 5e-5, 1e-3])
     commands = [tuple(draw(st.floats(-10.0, 10.0)) for _ in (0, 1)) for _ in (0, 1, 2)]
     return scene, commands
 
 
-@settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 25)), deadline=None,
-          derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def drawn_start(draw, scene, tolerances, policy="command_gravity_compensation"):
+    """`scene` under `policy` from a random pose and speed (slower at a fine step), at a
+    tolerance drawn from `tolerances`."""
+    speed = 1.0 if scene.step_size < 0.005 else 6.0
+    return scene.replace(
+        policy=policy,
+        initial_positions=tuple(draw(st.floats(-1.5, 1.5)) for _ in (0, 1)),
+        initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
+        tolerance=draw(st.sampled_from(tolerances)))
+
+
+def fuzz(examples: int):
+    """A fuzz's settings: `examples` derandomized, or ARM_SIM_FUZZ_EXAMPLES drawn afresh."""
+    return settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", examples)),
+                    deadline=None, derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
+                    suppress_health_check=[HealthCheck.too_slow,
+                                           HealthCheck.function_scoped_fixture])
+
+
+@fuzz(25)
 @given(case=smooth_runs())
 def test_random_smooth_runs_leave_the_books_as_python_leaves_them(case, monkeypatch):
     scene, commands = case

@@ -2,21 +2,16 @@
 the checks and their schedule in one compiled call (compiled/runs.py: Kernel.step), handing
 back to Python only where Python must speak; the books stay in the kernel's arrays between
 calls and are written back whenever Python reads them. The states and books are the
-pure-Python path's, bit for bit. Skipped without numba."""
-import os
-
+pure-Python path's, bit for bit. Skipped without numba, and in .ci/run's pure-Python pass
+(ARM_SIM_COMPILED=0): test_compiled's import skips it then, as it skips itself."""
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import given, strategies as st
 
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator, abs_residual
 
-from physics.test_compiled import books as error_books, python_and_compiled
-
-pytest.importorskip("numba")
-if os.environ.get("ARM_SIM_COMPILED") == "0":      # .ci/run's pure-Python pass: its second
-    pytest.skip("the compiled path is off (ARM_SIM_COMPILED=0); .ci/run's compiled pass "
-                "runs these", allow_module_level=True)
+from physics.test_compiled import (books as error_books, drawn_start, fuzz,
+                                   python_and_compiled)
 
 SCENES = {
     "release": load_scene("release"),
@@ -166,14 +161,10 @@ def stepped_runs(draw):
     name = draw(st.sampled_from(["release", "damped_release", "springs_oscillation",
                                  "payload_release", "stick_slip", "geared_arm"]))
     scene = load_scene(name)
-    speed = 1.0 if scene.step_size < 0.005 else 6.0
-    tolerance = draw(st.sampled_from([0.0, 1e-7, 5e-5]))
-    scene = scene.replace(
-        policy="command_gravity_compensation" if scene.policy == "zero" else scene.policy,
-        initial_positions=tuple(draw(st.floats(-1.5, 1.5)) for _ in (0, 1)),
-        initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
-        tolerance=tolerance,
-        estimate="off" if tolerance == 0.0 and draw(st.booleans()) else "global")
+    scene = drawn_start(draw, scene, [0.0, 1e-7, 5e-5], "command_gravity_compensation"
+                        if scene.policy == "zero" else scene.policy)
+    scene = scene.replace(estimate="off" if scene.tolerance == 0.0 and draw(st.booleans())
+                          else "global")
     if draw(st.booleans()):                 # divergent: the check must find it on both paths
         scene = scene.replace(payload={"mass": draw(st.sampled_from([1e4, 1e6]))},
                               step_size=scene.step_size * draw(st.sampled_from([1, 5])),
@@ -182,9 +173,7 @@ def stepped_runs(draw):
     return scene, commands
 
 
-@settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 12)), deadline=None,
-          derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@fuzz(12)
 @given(case=stepped_runs())
 def test_random_stepped_runs_leave_what_python_leaves(case, monkeypatch):
     scene, commands = case
