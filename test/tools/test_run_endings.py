@@ -79,7 +79,8 @@ def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_nam
 
 # `arm-sim run` with the stability plan's cap on sub-steps raised, so that one step of an
 # engaged compliant limit with damping 1e8 takes minutes (the cap bounds a step to ~2 s on
-# an idle machine); it says on stderr when its stop handler is in.
+# an idle machine); it says on stderr when its stop handler is in, and when the second
+# step starts (the first taken whole, kernels loaded).
 SLOW_STEP_RUN = [sys.executable, "-c", """
 import sys
 from arm_sim_ros.physics.stepping import stability
@@ -90,6 +91,13 @@ def noted(self):
     print("stop handler in", file=sys.stderr, flush=True)
     return enter(self)
 signals.StopOnSignals.__enter__ = noted
+from arm_sim_ros.physics.simulator import Simulator
+step = Simulator.step
+def told(self):
+    if self.steps == 1:
+        print("second step starts", file=sys.stderr, flush=True)
+    step(self)
+Simulator.step = told
 sys.exit(cli.main(sys.argv[1:]))
 """, "run", "--scene", "compliant_limit", "--set", "joint_limits.damping=1e8",
                  "--set", "initial_positions=0.1,1.95", "--set", "initial_velocities=0,3"]
@@ -104,7 +112,7 @@ def test_one_signal_stops_a_step_of_minutes_at_the_last_whole_step(tmp_path, sig
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert process.stderr.readline() == "stop handler in\n"
-        time.sleep(1.0)                             # the free step is taken within that
+        assert process.stderr.readline() == "second step starts\n"
         process.send_signal(getattr(signal, signal_name))
         out, err = process.communicate(timeout=30)  # a hang guard: the step takes minutes
     finally:

@@ -15,7 +15,7 @@ from __future__ import annotations
 from copy import deepcopy
 from time import perf_counter
 
-from ...physics.simulator import settle
+from ...physics.simulator import abs_residual, settle
 from ..signals import StepInterrupted
 
 KEEP_PERIOD = 0.05        # wall seconds between copies: bounds the steps taken again
@@ -49,7 +49,7 @@ class WholeSteps:
                     sim.step()
                 finally:
                     stop.within_step = False
-                largest = max(largest, abs(sim.residual()))
+                largest = max(largest, abs_residual(sim))
                 if on_step is not None:
                     on_step(sim)
                 whole = sim.steps
