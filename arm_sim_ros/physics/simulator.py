@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from math import isfinite, nan
+from math import inf, isfinite, nan
 
 from .trust import accuracy, guard
 from .compiled import build as compiled
@@ -282,12 +282,14 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     """Simulator.set_command, servo `setpoints` {(field, joint): value}. A new command moves
     the local error at once: the next step is checked (accuracy.py), not the one the
     schedule had come to."""
-    before = commanded(sim)
+    before, torque = commanded(sim), tuple(sim.dynamics.command)
     sim.dynamics.command[0] = tau1
     sim.dynamics.command[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
     if commanded(sim) != before:
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
+    if tuple(sim.dynamics.command) != torque and sim.accuracy.shadow is not None:
+        sim.accuracy.shadow.answered()        # a controller's answer (shadow.py)
 
 
 def commanded(sim: Simulator) -> tuple:
@@ -320,7 +322,9 @@ def books_for(sim: Simulator, scene: Scene, step):
                                            lambda kind, message: None, lambda: 0.0)
     return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
-                         int(scene.max_substeps), 4 + len(sim.extra), twin)
+                         int(scene.max_substeps), 4 + len(sim.extra), twin,
+                         sim.stability_ratio / (sim.stability_limit or inf),
+                         stability.stiff_names(sim.dynamics.active, sim.arm) or "damping")
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:
