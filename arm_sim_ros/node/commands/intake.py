@@ -9,10 +9,11 @@ import time
 from math import isfinite
 
 from ...interface import COMMAND_TOPIC
+from ...physics.model import MAX_ANGLE
 
 COMMAND_POLICIES = ("command", "command_gravity_compensation")
 WARN_PERIOD = 1.0                 # seconds between repeated warnings of one kind
-MAX_SETPOINT = 1e6                # rad, rad/s: as model.MAX_ANGLE (sin keeps digits)
+MAX_SETPOINT = MAX_ANGLE          # rad, rad/s: 1e6, where sin still keeps digits
 
 
 class RateLimitedLog:
@@ -95,19 +96,27 @@ def _not_taken(joint: str, interface: str, field: str) -> str:
     return f"{joint} is a {interface} joint: it does not take {field} (servo.interface)"
 
 
-def setpoint_refusal(field: str, data, interfaces, limit: float) -> str | None:
+def setpoint_refusal(field: str, data, interfaces) -> str | None:
     """Why `data` is not a [joint 1, joint 2] `field` command, or None (NaN: not set)."""
-    unit = "rad" if field == "position" else "rad/s"
-    values, why = _pair(data, f"{field}s in {unit}")
+    values, why = _pair(data, f"{field}s in {UNITS[field]}")
     if why is not None:
         return why
     for i, value in enumerate(values):
-        if value != value:
-            continue
-        if abs(value) > limit:
-            return f"{field} {i + 1} = {value} {unit} is not finite or beyond {limit:g}"
-        if field not in TAKES[interfaces[i]]:
+        if value == value and field not in TAKES[interfaces[i]]:
             return _not_taken(f"joint {i + 1}", interfaces[i], field)
+    return None
+
+
+UNITS = {"position": "rad", "velocity": "rad/s"}
+
+
+def out_of_range(setpoints: dict) -> str | None:
+    """Why a set-point {(field, joint): value} cannot be followed (±inf or beyond
+    MAX_SETPOINT), or None: checked where every topic's set-points come in."""
+    for (field, joint), value in setpoints.items():
+        if not abs(value) <= MAX_SETPOINT:
+            return (f"{field} {joint + 1} = {value} {UNITS[field]} is not finite or beyond "
+                    f"{MAX_SETPOINT:g}")
     return None
 
 
@@ -163,6 +172,7 @@ class CommandIntake:
         if setpoints:
             reason, setpoints = self.take_setpoints(setpoints, policy, now)
             if reason is not None:
+                self.received += 1
                 return reason, None, {}
         commanded = [(index[name], tau) for name, tau in zip(names, effort) if tau == tau]
         if not commanded:
@@ -178,7 +188,7 @@ class CommandIntake:
         """[joint 1, joint 2] from position_commands or velocity_commands (NaN: that joint
         not commanded): (refusal reason or None, None, set-points {(field, joint): value})."""
         self.received += 1
-        reason = setpoint_refusal(field, data, interfaces, MAX_SETPOINT)
+        reason = setpoint_refusal(field, data, interfaces)
         if reason is not None:
             return self._refuse("refused commands", f"refused {field} command: {reason}",
                                 reason)[0], None, {}
@@ -188,7 +198,12 @@ class CommandIntake:
 
     def take_setpoints(self, setpoints: dict, policy: str, now: float):
         """(None, `setpoints`) when the policy follows commands, else (None, {}) and a
-        warning; the timeout starts again."""
+        warning; the timeout starts again. Every topic's set-points come in here, so each is
+        range-checked here: (reason, {}) refused."""
+        reason = out_of_range(setpoints)
+        if reason is not None:
+            return self._refuse("refused commands", f"refused set-point command: {reason}",
+                                reason)[0], {}
         if policy not in COMMAND_POLICIES:
             self.warnings.warning("ignored commands", f"policy {policy!r} ignores set-point "
                                   "commands; set policy to command to drive the servos")
