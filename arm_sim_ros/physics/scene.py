@@ -70,6 +70,9 @@ class Scene:
         if max(abs(v) for v in self.initial_positions) > MAX_ANGLE:
             raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
                              f"{MAX_ANGLE:g} rad in magnitude")
+        if not max(abs(v) for v in self.setpoint) <= MAX_ANGLE:   # as the command topics'
+            raise SceneError(f"setpoint = {list(self.setpoint)} is beyond {MAX_ANGLE:g} "
+                             "(rad, rad/s) in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:
@@ -167,6 +170,9 @@ class Scene:
             key = key.strip()
             if not sep or not key:
                 raise SceneError(f"--set {text!r} is not of the form key=value")
+            if key in overrides:      # the last would win unseen: say which to keep
+                raise SceneError(f"--set {key} is given twice ({overrides[key]!r} and "
+                                 f"{value.strip()}); give it once")
             overrides[key] = parse_value(key, value)
         return self.replace(**overrides)
 
