@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .. import yaml_files
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
+from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
@@ -60,6 +61,9 @@ class Scene:
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
     max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
+    # what a run computes of its own error (trust/unestimated.py): global (the shadow and
+    # its checks) or off (the steps alone: no error estimate, so tolerance 0)
+    estimate: str = "global"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -67,12 +71,9 @@ class Scene:
         for f in fields(self):
             object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
                                                           getattr(self, f.name)))
-        if max(abs(v) for v in self.initial_positions) > MAX_ANGLE:
-            raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
-                             f"{MAX_ANGLE:g} rad in magnitude")
-        if not max(abs(v) for v in self.setpoint) <= MAX_ANGLE:   # as the command topics'
-            raise SceneError(f"setpoint = {list(self.setpoint)} is beyond {MAX_ANGLE:g} "
-                             "(rad, rad/s) in magnitude")
+        for key in ("initial_positions", "setpoint"):     # rad (rad/s): as commands' are
+            if not max(abs(v) for v in getattr(self, key)) <= MAX_ANGLE:
+                raise SceneError(f"{key} = {list(getattr(self, key))} is beyond {MAX_ANGLE:g}")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:
@@ -94,6 +95,13 @@ class Scene:
         if not self.tolerance >= 0:
             raise SceneError(f"tolerance = {self.tolerance} must be >= 0 (local error per "
                              "simulated second; 0: estimate only, never split a step)")
+        if self.estimate not in ESTIMATES:
+            raise SceneError(f"estimate {self.estimate!r} is unknown; choose global (the "
+                             "error estimate, the default) or off (none)")
+        if self.estimate == "off" and self.tolerance != 0:
+            raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
+                             f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
+                             "out (estimate off alone sets it to 0)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
@@ -160,6 +168,8 @@ class Scene:
                 merged[key] = value
             else:
                 raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+        if merged.get("estimate") == "off" and "tolerance" not in merged:
+            merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
 
     def with_text_overrides(self, assignments) -> "Scene":
@@ -170,9 +180,6 @@ class Scene:
             key = key.strip()
             if not sep or not key:
                 raise SceneError(f"--set {text!r} is not of the form key=value")
-            if key in overrides:      # the last would win unseen: say which to keep
-                raise SceneError(f"--set {key} is given twice ({overrides[key]!r} and "
-                                 f"{value.strip()}); give it once")
             overrides[key] = parse_value(key, value)
         return self.replace(**overrides)
 

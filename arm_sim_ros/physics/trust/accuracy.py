@@ -33,7 +33,8 @@ from ..stepping import stability
 from .controller import SAFETY, Control, retake, said_count, said_lost, said_unreachable
 from ..stepping.integrators import compile_step
 from .shadow import FIRST_EVERY, ROUNDING, Shadow, Twin, next_every
-from .unchecked import TIGHTER, Embedded, Unchecked
+from .embedded import TIGHTER, Embedded
+from .unestimated import Off, Unchecked
 
 NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
 DEFAULT_MAX_SUBSTEPS = 1000   # the tolerance's ceiling per step (scene key max_substeps)
@@ -317,13 +318,18 @@ def restore(stepper, kept) -> None:
 
 def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
          clock=None, stepper=None, previous=None, cap: int = DEFAULT_MAX_SUBSTEPS,
-         states: int = 4, twin=None, stiffness: float = 0.0, stiff: str = "damping"):
+         states: int = 4, twin=None, estimate: str = "global", stiffness: float = 0.0,
+         stiff: str = "damping"):
     """The error books, with the step they take (`step` as the stability plan's `substeps`
     equal sub-steps): the embedded pair's own estimate, or checked equal sub-steps (over the
-    stability plan's) of a fixed-step method, switched at events by `stepper` if any.
-    `previous`: the books so far (a payload grasped rebuilds the dynamics mid-run);
-    `stiffness`: the stability plan's ratio over its limit (Accuracy.at_shadow); `stiff`:
-    the effects that make it stiff (a refusal names them)."""
+    stability plan's) of a fixed-step method, switched at events by `stepper` if any; with
+    `estimate` off, the planned steps alone (unestimated.Off). `previous`: the books so far
+    (a payload grasped rebuilds the dynamics mid-run); `stiffness`: the stability plan's
+    ratio over its limit (at_shadow); `stiff`: the effects that make it stiff (a refusal
+    names them)."""
+    if estimate == "off":
+        return Off(stepper.advance if stepper is not None else
+                   stability.substepping(step, substeps), substeps, stepper)
     if getattr(tableau, "adaptive", False) and stepper is not None:
         # dopri5 between located switches: its pieces' own estimates are not summed (NaN);
         # without the switches its error control would chase the kink forever.

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from ...usage import DONE, FAULT, UNEXPLAINED
 from .data import FitError
 
 MAX_STEPS_PER_SAMPLE = 1000     # simulation steps between two samples, sub-steps included
@@ -33,9 +34,9 @@ MIN_SEGMENT_SAMPLES = 10        # samples a multiple-shooting segment holds at l
 MAX_JACOBIAN_BYTES = 2 ** 30    # the dense Jacobian of the training problem
 DEFAULT_SECONDS = 900.0         # wall time of a whole fit (--max-seconds)
 EXPLAINED = 2.0                 # RMS error in units of the noise, every channel
-EXPLAINED_CODE = 0              # exit codes: the model explains the recording,
-STOPPED_CODE = 1                # a bound reached before it converged,
-UNEXPLAINED_CODE = 3            # converged, but the model misses the recording
+# exit codes (usage.py): the model explains the recording, a bound reached before it
+# converged, converged but the model misses the recording
+EXPLAINED_CODE, STOPPED_CODE, UNEXPLAINED_CODE = DONE, FAULT, UNEXPLAINED
 CHANNELS = ("q1", "q2", "qd1", "qd2")
 
 

@@ -1,6 +1,5 @@
-"""The error books of steps the tolerance does not split: an embedded pair's (dopri5),
-which controls its own steps, and none (steps the stability plan refuses, dopri5 between
-located switches). accuracy.plan chooses them.
+"""The error books of an embedded pair (dopri5), which controls its own steps: its own local
+error estimate, and the shadow's measured on the schedule against a tighter step.
 """
 from __future__ import annotations
 
@@ -53,26 +52,3 @@ class Embedded:
         self.every = next_every(self.every, predicted, measured)
         self.due = (self.clock() if self.clock else 0) + self.every
         return y1
-
-
-class Unchecked:
-    """No estimate (NaN): steps the stability plan refuses, and dopri5 on a scene that switches
-    modes (`stepper`)."""
-
-    error_estimate = float("nan")
-    due = 0
-    shadow = None             # no global estimate: books after these start afresh
-
-    def __init__(self, advance, substeps: int, stepper=None):
-        self.check = self.plain = advance
-        self.substeps, self.stepper = substeps, stepper
-
-    def reset(self) -> None:
-        pass
-
-    def accumulated(self) -> float:
-        return self.error_estimate
-
-    def taken(self, steps: int) -> int:
-        return (steps * self.substeps if self.substeps > 1 else 0) + (
-            self.stepper.extra_substeps if self.stepper is not None else 0)
