@@ -71,9 +71,9 @@ class Scene:
         for f in fields(self):
             object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
                                                           getattr(self, f.name)))
-        for key in ("initial_positions", "setpoint"):     # rad (rad/s): as commands' are
-            if not max(abs(v) for v in getattr(self, key)) <= MAX_ANGLE:
-                raise SceneError(f"{key} = {list(getattr(self, key))} is beyond {MAX_ANGLE:g}")
+        for key, at in (("initial_positions", self.initial_positions), ("setpoint", self.setpoint)):
+            if not max(abs(v) for v in at) <= MAX_ANGLE:     # a set-point: as commands' are
+                raise SceneError(f"{key} = {list(at)} is beyond {MAX_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:
