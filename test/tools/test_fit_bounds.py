@@ -164,6 +164,21 @@ def test_corrupted_bag_bytes_are_one_line_never_a_traceback(good_bag, where, dat
     assert_read_or_refused(corrupted(good_bag, where, data))
 
 
+def test_a_damaged_message_definition_is_one_short_line(good_bag):
+    """The hunt's find: a byte of the schema in the MCAP zeroed ("Header head\\x00r"):
+    rosbags quoted the whole definition over 16 lines."""
+    copy = Path(f"{good_bag}_{next(COPIES)}")
+    shutil.copytree(good_bag, copy)
+    (mcap,) = copy.glob("*.mcap")
+    raw = mcap.read_bytes()
+    at = raw.rindex(b"std_msgs/Header header") + len(b"std_msgs/Header head")   # summary
+    mcap.write_bytes(raw[:at] + b"\x00" + raw[at + 1:])
+    with pytest.raises(FitError) as refused:
+        read_recording(str(copy), JOINT_NAMES)
+    assert "\n" not in str(refused.value) and len(str(refused.value)) < 250
+    assert "Could not parse" in str(refused.value)
+
+
 @pytest.mark.hunt
 @settings(max_examples=2000, deadline=None, derandomize=True, database=None,
           suppress_health_check=list(HealthCheck))

@@ -114,6 +114,13 @@ def _read_csv(path: Path):
     return data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5:7]
 
 
+def _brief(error: Exception, limit: int = 100) -> str:
+    """rosbags' message on one line, cut at `limit` characters: a damaged message
+    definition is quoted whole, over many lines."""
+    line = " ".join(str(error).split())
+    return (line[:limit] + " ...") if len(line) > limit else (line or "no detail")
+
+
 def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
     from rosbags.highlevel import AnyReader, AnyReaderError
 
@@ -143,10 +150,10 @@ def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
     except OSError as error:
         raise FitError(f"cannot read bag {path}: {error.strerror or error}") from None
     except AnyReaderError as error:
-        raise FitError(f"cannot read bag {path}: {error}") from None
+        raise FitError(f"cannot read bag {path}: {_brief(error)}") from None
     except Exception as error:  # noqa: BLE001 - corrupt bytes fail in a dozen ways in rosbags
         raise FitError(f"cannot read bag {path}: it is damaged ({type(error).__name__}: "
-                       f"{str(error)[:100] or 'no detail'})") from None
+                       f"{_brief(error)})") from None
     if not samples:
         raise FitError(f"{path}: /{JOINT_STATES_TOPIC} holds no message")
     stamps = np.array([s[0] for s in samples], dtype=np.int64)
