@@ -227,6 +227,7 @@ def test_a_scheduler_that_is_no_dask_scheduler_is_one_line(capsys, short_bag, mo
     """Dask's dashboard port: "Unable to allocate 3.07 EiB"; a silent server: no end."""
     pytest.importorskip("distributed")
     monkeypatch.setattr(command, "CONNECT_SECONDS", 1.0)
+    monkeypatch.setattr(command, "CONNECT_GRACE", 2.0)
     line = fit(capsys, short_bag, *base_args(), "--free", "damping", "--scheduler",
                listening(answer), code=2)
     assert expected in line

@@ -39,6 +39,7 @@ from .problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, st
 from .stats import uncertainty, validate, warnings_for
 
 CONNECT_SECONDS = 10.0      # a --scheduler that has not answered by then is given up
+CONNECT_GRACE = 5.0         # then Client's own timeout may still say why (refused, not Dask)
 
 
 class Stopped(Exception):
@@ -215,7 +216,7 @@ def connected(scheduler: str):
 
     thread = threading.Thread(target=connect, daemon=True)
     thread.start()
-    thread.join(CONNECT_SECONDS + 5.0)
+    thread.join(CONNECT_SECONDS + CONNECT_GRACE)
     if not made:
         raise FitError(f"--scheduler {scheduler}: no answer in {CONNECT_SECONDS:g} s (is it a "
                        "Dask scheduler, e.g. tcp://host:8786?)")
