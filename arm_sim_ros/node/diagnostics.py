@@ -15,6 +15,7 @@ class JointStateData:
     position: list
     velocity: list
     effort: list
+    truth: JointStateData | None = None   # with sensors: the state itself (~/true_joint_states)
 
 
 @dataclass(frozen=True)

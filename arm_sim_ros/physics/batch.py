@@ -77,6 +77,9 @@ class Batch:
                              "one arm at a time (arm-sim run)")
         if (scene.servo or {}).get("rate"):     # its samples are taken arm by arm
             raise SceneError("batch rollouts cannot run a discrete servo (servo.rate); arm-sim run")
+        if scene.sensors is not None or scene.command_delay:   # sampled, delayed arm by arm
+            raise SceneError("batch rollouts cannot run sensors or a command_delay "
+                             "(physics/sensing/); arm-sim run")
         if count is None:
             count = len(positions) if positions is not None else (
                 len(velocities) if velocities is not None else 1)

@@ -12,6 +12,7 @@ path (the names below; blueprint.py gives them series names, colours and places)
     books/<kind>/<channel>   every channel of the scene by name (kind: input, loss, transfer)
     joints/angle, joints/velocity, joints/torque (with a drive), joints/current (windings)
     joints/commanded_torque  the command held at each step (command policies)
+    joints/angle_measured, joints/velocity_measured   with sensors: as read (the row's last 4)
 
 With books/stored/* + inputs - losses the residual closes: Σ stored changes - Σ inputs +
 Σ losses = energy/balance_residual (transfer channels, e.g. the motors' work on the joints
@@ -32,6 +33,8 @@ STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"
 KINDS = ("input", "loss", "transfer")
 CURRENTS = ("i1", "i2")           # the windings' extra states (A)
 COMMANDED = "joints/commanded_torque"
+MEASURED = {"joints/angle": "joints/angle_measured",        # with sensors: the readings
+            "joints/velocity": "joints/velocity_measured"}  # beside the truth
 # How far each step is from the exact flow (physics/trust/accuracy.py), and what it cost.
 LOCAL_ERROR = "accuracy/local_error"            # the step's estimate, max over q, q̇
 ACCUMULATED_ERROR = "accuracy/accumulated_error"  # their sum since reset
@@ -85,6 +88,7 @@ class Snapshot:
                             for e in dynamics.active if stores_energy(e))
         self.drives = any(e.drives for e in dynamics.active)
         self.commanded = sim.scene.policy.startswith("command")
+        self.measured = sim.scene.sensors is not None   # rows end in the readings (sensing/)
         self.arm3d = None         # the recorder's 3D arm (arm3d.Arm3D), when the URDF is this arm
         self.initial_energy = sim.initial_energy
         # (inputs, losses) booked by channels a live change removed (damping set to 0 ...)
@@ -117,7 +121,7 @@ class Snapshot:
     def key(self) -> tuple:
         """What the blueprint and the series' styles depend on."""
         return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
-                self.commanded, self.estimates, self.held_by, self.initial_energy)
+                self.commanded, self.estimates, self.held_by, self.initial_energy, self.measured)
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -202,6 +206,9 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     for name, kind in snap.kinds.items():
         values[channel_path(name, kind)] = books[name]
     values["joints/angle"], values["joints/velocity"] = states[:, 0:2], states[:, 2:4]
+    if snap.measured:
+        values[MEASURED["joints/angle"]] = states[:, -4:-2]
+        values[MEASURED["joints/velocity"]] = states[:, -2:]
     if snap.drives:
         values["joints/torque"] = snap.joint_torque(states, commands)
     if snap.commanded:

@@ -19,7 +19,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS,
+                          TRUE_JOINT_STATES_TOPIC, split_stamp)
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..services.parameter_services import could_not_apply
@@ -79,6 +80,7 @@ class ArmSimNode(Node):
         values = config.values
         self.joint_state_publisher = self.create_publisher(
             JointState, values["joint_states_topic"], 10)
+        self.truth_publisher = None      # ~/true_joint_states, made with the first truth
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.command_subscription = self.create_subscription(
@@ -131,6 +133,11 @@ class ArmSimNode(Node):
 
     def _publish(self, data: JointStateData) -> None:
         self.joint_state_publisher.publish(to_joint_state(data))
+        if data.truth is not None:       # sensors: the readings above, the state here
+            if self.truth_publisher is None:
+                self.truth_publisher = self.create_publisher(
+                    JointState, TRUE_JOINT_STATES_TOPIC, 10)
+            self.truth_publisher.publish(to_joint_state(data.truth))
         if self.core.config.values["publish_clock"]:
             self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
 
