@@ -27,13 +27,17 @@ CLOCK = "rosgraph_msgs/msg/Clock"
 PUBLISHES = {
     JOINT_STATES_TOPIC: (JOINT_STATE, "every tick: position (rad, unwrapped), velocity "
                          "(rad/s) and effort (the torque the joints receive, N m), stamped "
-                         "with simulated time"),
+                         "with simulated time; with `sensors`, position and velocity as read"),
     "/clock": (CLOCK, "simulated time, every tick, equal to the JointState stamps "
                "(publish_clock)"),
     DIAGNOSTICS_TOPIC: (DIAGNOSTIC_ARRAY, "1 Hz: refused commands, real-time factor, energy "
                         "balance residual, late ticks, the error estimate"),
     "/parameter_events": ("rcl_interfaces/msg/ParameterEvent", "every accepted parameter change"),
+    TRUE_JOINT_STATES_TOPIC: (JOINT_STATE, "with `sensors` only (from the first tick they are "
+                              "set): the state itself, same stamps, while joint_states "
+                              "carries the readings"),
 }
+WITH_SENSORS = (TRUE_JOINT_STATES_TOPIC,)    # published only while the scene has sensors
 SUBSCRIBES = {
     COMMAND_TOPIC: (FLOAT64_MULTI_ARRAY, "[tau1, tau2] N m, held until the next one; zero "
                     "after command_timeout"),

@@ -39,7 +39,7 @@ class Sensors:
 
     name = "sensors"
     parameters = (
-        Parameter("seed", "float", "whole number", "whole", default=0.0,
+        Parameter("seed", "float", "1", "whole", default=0.0,
                   description="seed of every draw: the same seed gives the same readings"),
         Parameter("rate", "float", "Hz", "positive", default=None,
                   description="sample rate, readings held in between; 1/rate a whole number "
