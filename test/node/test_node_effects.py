@@ -257,9 +257,10 @@ def test_a_ros2_param_dump_with_keys_not_set_starts_the_node_again(tmp_path):
 
 def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_is_start_only():
     names = {spec.name for spec in EFFECT_PARAMETERS}
-    live = {"effort_limits", "friction", "controller_model", "payload", "servo"}
+    live = {"effort_limits", "friction", "controller_model", "payload", "servo", "sensors"}
     assert {n.partition(".")[0] for n in names & set(LIVE)} == live
-    assert set(LIVE) == {"damping"} | {n for n in names if n.partition(".")[0] in live}
+    assert set(LIVE) == {"damping", "command_delay"} | {n for n in names
+                                                        if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
                                "joint_commands_topic"} | (names - set(LIVE))
 
