@@ -307,7 +307,7 @@ def steppers(sim: Simulator, scene: Scene) -> None:
     sim.sensing = sensing.attach(sim, scene)   # readings and a control loop act between steps
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
-    sim.kernel = None if sim.sensing is not None else compiled.kernel_for(
+    sim.kernel = None if sim.sensing is not None and sim.sensing.active else compiled.kernel_for(
         sim.dynamics, sim._step, sim.switching or sim._driver)
     if sim.kernel is not None and sim.switching is not None and hasattr(step, "module"):
         sim.kernel.switched = Switched(step, sim._driver is not None)   # switch_run.py
@@ -363,8 +363,11 @@ def readings(sim: Simulator) -> tuple:
 
 
 def recorded_row(sim) -> tuple:
-    """What a recording keeps of a step: the state, with sensors the readings after it."""
-    return sim.state + sim.readings if sim.scene.sensors is not None else sim.state
+    """What a recording keeps of a step: the state; with sensors, the readings after it;
+    under a control loop (sensing/loop.py), the torque that acted over it."""
+    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
+    looped = sim.dynamics.command is not sim.dynamics.given
+    return row + tuple(sim.dynamics.command) if looped else row
 
 
 def check_divergence(sim: Simulator) -> None:

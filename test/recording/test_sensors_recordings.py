@@ -132,3 +132,42 @@ def test_rerun_records_the_measured_series_and_draws_them_over_the_true_ones(tmp
 def test_without_sensors_no_measured_series(sensors):
     snap = Snapshot(Simulator(SCENE.replace(sensors=sensors)))
     assert ("joints/angle_measured" in blueprint.series(snap)) == (sensors is not None)
+
+
+def test_a_servo_scene_with_sensors_records_its_effects_document(tmp_path):
+    """The servo's interface names and the sensors' velocity are text in the effects table
+    (a servo scene's recording once failed on them: format code 'g' for a str)."""
+    snap = Snapshot(Simulator(load_scene("servo_hold").replace(
+        sensors={"velocity": "differences", "position_resolution": [0.006, 0.006]},
+        command_delay=0.002)))
+    document = blueprint.effects_document(snap)
+    assert "| servo | interface | position, position | position/velocity/effort |" in document
+    assert "| sensors, latency | seed | 0 |  |" in document
+    assert "|  | position_resolution | 0.006, 0.006 | rad per count |" in document
+    assert "|  | velocity | differences | differences/true |" in document
+    assert "|  | command_delay | 0.002 | s |" in document
+    path = tmp_path / "servo.rrd"
+    assert cli.main(["run", "--scene", "servo_hold", "--duration", "0.05", "--rerun",
+                     str(path)]) == 0
+    assert len(read_back(path)["joints/angle"]["sim_time"]) == 51
+
+
+def test_the_torque_a_control_loop_applies_is_recorded_step_by_step(tmp_path):
+    """Under a control loop the drive's torque changes every step: the recording's joint
+    torque and the CSV's tau are each step's own, not the last one of a batch."""
+    args = ["--scene", "servo_hold", *SENSORS, "--set", "command_delay=0.002",
+            "--duration", "0.4"]
+    assert cli.main(["run", *args, "--rerun", str(tmp_path / "run.rrd"),
+                     "--csv", str(tmp_path / "run.csv")]) == 0
+    sim = Simulator(load_scene("servo_hold").replace(sensors=SCENE.sensors,
+                                                     command_delay=0.002))
+    torques = [sim.joint_torque()]
+    for _ in range(400):
+        sim.step()
+        torques.append(sim.joint_torque())
+    assert len(set(torques)) > 100                     # it changes from step to step
+    recorded = scalars(read_back(tmp_path / "run.rrd")["joints/torque"])
+    assert [tuple(t) for t in recorded.tolist()] == torques
+    with open(tmp_path / "run.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [(float(r["tau1"]), float(r["tau2"])) for r in rows] == torques

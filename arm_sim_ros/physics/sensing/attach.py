@@ -63,6 +63,12 @@ class Sensing:
         self.loop = (Loop(dynamics, scene, carried.loop if carried is not None else None)
                      if dynamics.command is not dynamics.given else None)
 
+    @property
+    def active(self) -> bool:
+        """Whether it acts between steps (readings to sample, a loop): a compiled run of many
+        steps in one call (Simulator.run) would miss that."""
+        return self.readings is not None or self.loop is not None
+
     def reading(self, sim) -> tuple:
         """(q1, q2, q̇1, q̇2) as read now (a sample due now taken first)."""
         if self.readings is None:

@@ -294,13 +294,13 @@ def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
 # --- the effects document ---------------------------------------------------------------
 
 def _value(value) -> str:
-    if isinstance(value, tuple):
-        return ", ".join(f"{v:g}" for v in value)
+    if isinstance(value, tuple):      # numbers, or names (a servo's interfaces)
+        return ", ".join(_value(v) for v in value)
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def _unit(unit: str) -> str:
-    return "" if unit == "1" else unit.replace("^2", "²")
+def _unit(unit: str) -> str:      # a table cell: choices a|b as a/b
+    return "" if unit == "1" else unit.replace("^2", "²").replace("|", "/")
 
 
 def effect_rows(snap, effect) -> list[tuple[str, str, str]]:

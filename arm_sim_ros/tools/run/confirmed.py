@@ -21,6 +21,7 @@ class StepView:
         self._sim = sim
         self.state, self.steps, self.holding = sim.state, sim.steps, sim.holding
         self.readings = sim.readings      # with sensors: as read after the step
+        self._torque = sim.joint_torque()  # under a control loop it changes every step
         self.fault, self.refused_steps = sim.fault, sim.refused_steps
         _, self.error_estimate, self.accumulated_error, self.substeps_taken = error_books(sim)
 
@@ -33,6 +34,10 @@ class StepView:
 
     def sample(self):
         return sample(self)
+
+    def joint_torque(self, state=None):
+        return self._torque if state is None or state is self.state else \
+            self._sim.joint_torque(state)
 
     def residual(self, state=None) -> float:
         return self._sim.residual(self.state if state is None else state)
