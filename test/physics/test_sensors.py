@@ -434,3 +434,24 @@ def test_batch_rollouts_refuse_sensors_and_a_command_delay_in_one_line():
     for scene in (SWINGING.replace(sensors=CONTRACT), COMMANDED.replace(command_delay=0.001)):
         with pytest.raises(SceneError, match="batch rollouts cannot run (sensors|a command_delay)"):
             Batch(scene, count=2)
+
+
+@pytest.mark.parametrize("scene", [
+    SWINGING.replace(sensors=CONTRACT),
+    load_scene("servo_hold").replace(sensors=CONTRACT, command_delay=0.002),
+    load_scene("moving_gravity_compensation").replace(step_size=1e-3, sensors=CONTRACT),
+], ids=["readings", "servo loop", "compensation loop"])
+def test_the_compiled_step_reads_the_acting_torque_as_python_does_bit_for_bit(scene,
+                                                                             monkeypatch):
+    """Under a control loop the drive's code reads the acting torque where a command policy
+    reads its command: the compiled step takes it, and agrees with Python's bit for bit."""
+    pytest.importorskip("numba")
+    monkeypatch.setenv("ARM_SIM_COMPILED", "0")
+    python = Simulator(scene)
+    monkeypatch.setenv("ARM_SIM_COMPILED", "1")
+    fast = Simulator(scene)
+    assert (python.path, fast.path) == ("python", "compiled (numba)")
+    for sim in (python, fast):
+        sim.run(0.5)
+    assert python.state == fast.state and python.readings == fast.readings
+    assert python.accumulated_error == fast.accumulated_error
