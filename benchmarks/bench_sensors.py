@@ -20,17 +20,19 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.params.parameters import resolve_parameters
-from arm_sim_ros.physics.scene import load_scene
-from arm_sim_ros.physics.sensing.noise import Draws
-from arm_sim_ros.physics.simulator import Simulator
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
+
+from bench_core import TreeWorker  # noqa: E402  (a worker on the tree before)
+
+from arm_sim_ros.node.core import ArmSimCore  # noqa: E402
+from arm_sim_ros.node.params.parameters import resolve_parameters  # noqa: E402
+from arm_sim_ros.physics.scene import load_scene  # noqa: E402
+from arm_sim_ros.physics.sensing.noise import Draws  # noqa: E402
+from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 
 STEP = 1e-3
 FULL = {"seed": 7, "rate": 500.0, "position_resolution": [0.0015339807878856412] * 2,
@@ -76,29 +78,11 @@ for _ in sys.stdin:
 """
 
 
-class Before:
+class Before(TreeWorker):
     """`release`'s step and run on the tree before sensors, in a worker process."""
 
     def __init__(self, tree: Path, steps: int):
-        env = dict(os.environ, PYTHONPATH=str(tree))
-        self.process = subprocess.Popen([sys.executable, "-c", BEFORE_WORKER, str(steps)],
-                                        cwd=tree, env=env, stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, text=True)
-        where = Path(self.process.stdout.readline().strip() or "(the worker failed)")
-        if tree.resolve() not in where.resolve().parents:
-            self.close()
-            sys.exit(f"--before {tree}: imported arm_sim_ros from {where}, not from the tree")
-        self.best = [float("inf"), float("inf")]
-
-    def run(self) -> None:
-        self.process.stdin.write("\n")
-        self.process.stdin.flush()
-        times = [float(t) for t in self.process.stdout.readline().split()]
-        self.best = [min(b, t) for b, t in zip(self.best, times)]
-
-    def close(self) -> None:
-        self.process.stdin.close()
-        self.process.wait()
+        super().__init__(tree, BEFORE_WORKER, str(steps))
 
 
 class Quiet:
@@ -155,6 +139,10 @@ def main() -> None:
     for _ in range(2):                     # warm: compiled code, caches
         for name, measure in rows:
             measure()
+        if before is not None:
+            before.run()
+    if before is not None:
+        before.best = None
     try:
         for r in range(args.repeat):
             turn = rows[r % len(rows):] + rows[:r % len(rows)]
