@@ -452,3 +452,16 @@ def test_the_compiled_step_reads_the_acting_torque_as_python_does_bit_for_bit(sc
         sim.run(0.5)
     assert python.state == fast.state and python.readings == fast.readings
     assert python.accumulated_error == fast.accumulated_error
+
+
+def test_sensors_named_live_on_a_scene_without_them_read_from_then_on():
+    sim = Simulator(SWINGING)
+    sim.run(0.1)
+    sim.change_scene(SWINGING.replace(sensors={"delay": 0.002}))
+    held = sim.state[:4]
+    assert sim.readings == held                       # sample 0 now, at t = 0.1 s
+    sim.step()
+    sim.step()
+    assert sim.readings == held
+    sim.step()
+    assert sim.readings != held

@@ -58,7 +58,7 @@ class Sensing:
         self.readings = None
         if not model.exact:
             self.readings = Readings(model, old)
-            if carried is not None and old is None:      # live: readings from now on
+            if old is None and hasattr(sim, "state"):    # live: readings from now on
                 self.readings.start(sim.steps, sim.state, self.index)
         self.loop = (Loop(dynamics, scene, carried.loop if carried is not None else None)
                      if dynamics.command is not dynamics.given else None)
