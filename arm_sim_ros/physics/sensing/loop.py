@@ -15,8 +15,10 @@ command_delay later and is held until the next acts: a command given at t acts f
 t + command_delay, in order, none lost. The step's code reads the acting torque as a
 command policy reads its command: a constant within the step (RK4 keeps its order, the
 compiled step takes it), its power booked as `work`, so the books close as without sensors.
-Both the motion and its shadow (the global error estimate) are driven by the torques the
-motion's controller computed: the estimate is the integration error under those torques.
+The shadow of the global error estimate (trust/shadow.py) has a controller of its own: it
+reads the motion's reading moved by how far the shadow is from the motion (the counts and
+draws the motion read, the feedback its own), steps its own integrals and delays its own
+torque, so that an arm the loop holds up, unstable without it, does not pull the two apart.
 
 Before t = command_delay the torque the law asks at t = 0 acts: the arm was held in its
 initial state until then. A live change of command_delay applies to what is computed from
@@ -42,23 +44,23 @@ class Loop:
         self.drive = next(e for e in dynamics.active if getattr(e, "acting", None) is not None)
         self.servo = self.drive if isinstance(self.drive, Servo) else None
         self.delay = delay_steps("command_delay", scene.command_delay, scene.step_size)
-        self.every, self.integrals = 1, ()
+        self.every = 1
         if self.servo is not None:      # its rate a whole number of steps (attach.check)
             self.every = self.servo.every or 1
             self.servo.period = self.servo.period or scene.step_size
-            self.integrals = tuple(4 + dynamics.extra.index(f"integral{j}") for j in (1, 2))
         self.line = None                 # until reset, or the first step after a live start
+        self.shadow_acting = list(self.acting)    # the shadow's torque (beside)
         if carried is not None:          # a live change: what is in flight goes on
             self.line, self.inputs = carried.line, carried.inputs
-            self.acting[:] = carried.acting
+            self.acting[:], self.shadow_acting = carried.acting, carried.shadow_acting
 
     def reset(self, state, reading) -> None:
         """At t = 0: the law's torque there acts until the first computed one does."""
         self.inputs = self._inputs()
         torque = (tuple(self.servo.law((*reading, *state[4:]), torque_only=True))
                   if self.servo is not None else tuple(self.drive.law(reading[0:2])))
-        self.line = deque([(-1, torque, False)])
-        self.acting[:] = torque
+        self.line = deque([(-1, torque, False, torque)])
+        self.acting[:] = self.shadow_acting[:] = torque
 
     def before(self, sim, reading) -> None:
         """At the start of step sim.steps: a sample of the controller when one is due, and
@@ -68,17 +70,27 @@ class Loop:
         n, line = sim.steps, self.line
         if n % self.every == 0:
             inputs = self._inputs()
-            line.append((max(n + self.delay, line[-1][0]), self._law(sim, reading),
-                         inputs != self.inputs))
+            torque = self._law(sim, reading)
+            line.append((max(n + self.delay, line[-1][0]), torque, inputs != self.inputs,
+                         self._shadow_law(sim, reading, torque)))
             self.inputs = inputs
         while len(line) > 1 and line[1][0] <= n:
             line.popleft()
             if line[0][2]:               # computed from a new command: it acts, none lost
                 break
-        torque = line[0][1]
+        _, torque, _, self.shadow_acting[:] = line[0]
         if torque != tuple(self.acting):  # a new torque moves the local error at once: checked
             self.acting[:] = torque
             sim.accuracy.due = min(sim.accuracy.due, n)
+
+    def beside(self, advance, f, z, h):
+        """advance(f, z, h) under the shadow's torque (Shadow.follow: its `sampled`)."""
+        mine = self.acting[:]
+        self.acting[:] = self.shadow_acting
+        try:
+            return advance(f, z, h)
+        finally:
+            self.acting[:] = mine
 
     def _inputs(self) -> tuple:
         return (*self.given, *(self.servo.setpoint if self.servo is not None else ()))
@@ -90,13 +102,30 @@ class Loop:
         state, torque = sim.state, [0.0, 0.0]
         stepped = self.servo.sample((*reading, *state[4:]), torque)
         if stepped[4:] != state[4:]:
-            replace_state(sim, state, (*state[:4], *stepped[4:]), self.integrals)
+            replace_state(sim, state, (*state[:4], *stepped[4:]))
         return tuple(torque)
 
 
-def replace_state(sim, old, new, changed) -> None:
-    """sim's state `old` becomes `new` (a controller's integrals, indices `changed`): the
-    switching stepper's mode, the confirmed state and the shadow go on from it."""
+    def _shadow_law(self, sim, reading, torque) -> tuple:
+        """The shadow's torque: the law at the reading moved by the shadow's distance from
+        the motion, its own integrals stepped; the motion's where it is not followed."""
+        shadow = getattr(sim.accuracy, "shadow", None)
+        z = shadow.start(sim.state) if shadow is not None else None
+        if z is None:
+            return torque
+        shadow.sampled = self            # it steps beside the motion under its own torque
+        moved = tuple(r + a - b for r, a, b in zip(reading, z, sim.state))
+        if self.servo is None:
+            return tuple(self.drive.law(moved[0:2]))
+        own = [0.0, 0.0]
+        shadow.shadow = (*z[:4], *self.servo.sample((*moved, *z[4:]), own)[4:])
+        return tuple(own)
+
+
+def replace_state(sim, old, new) -> None:
+    """sim's state `old` becomes `new` (its controller's integrals stepped): the
+    switching stepper's mode, the confirmed state and the shadow go on from it (the shadow
+    with integrals of its own: Loop._shadow_law)."""
     sim.state = new
     if sim.switching is not None and sim.switching.last is old:
         sim.switching.last = new
@@ -104,7 +133,4 @@ def replace_state(sim, old, new, changed) -> None:
         sim._sound = new
     shadow = getattr(sim.accuracy, "shadow", None)
     if shadow is not None and shadow.last is old and shadow.shadow is not None:
-        z = list(shadow.shadow)
-        for i in changed:               # the shadow's controller is the motion's
-            z[i] = new[i]
-        shadow.shadow, shadow.last = tuple(z), new
+        shadow.last = new
