@@ -15,8 +15,8 @@ from math import isfinite
 
 from ..interface import NODE_NAME
 from ..physics.effects import servo
-from ..physics.scene import angle_warning, changed_values, load_scene
-from ..physics.urdf.read import read_urdf
+from ..physics.scene import angle_warning, load_scene
+from ..physics.urdf.read import changed_values, read_urdf
 from ..physics.simulator import Simulator
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog

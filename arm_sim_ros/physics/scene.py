@@ -26,11 +26,11 @@ from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
               "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
+MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 # Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
 # a validated mapping is built for its cross-checks.
 MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
 BUILT = BUILDERS | {"sensors": sensing.Sensors}
-MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 
 
 class SceneError(ValueError):
@@ -309,19 +309,6 @@ def parse_value(key: str, text: str):
         raise SceneError(f"{key}={text!r} is malformed: expected "
                          f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
     return text
-
-
-def changed_values(scene: "Scene", other: "Scene") -> list[str]:
-    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
-    what a URDF replaced."""
-    def shown(value):
-        if isinstance(value, tuple):
-            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
-        if isinstance(value, dict):
-            return "{" + ", ".join(value) + "}"
-        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
-    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
-            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]
 
 
 def angle_warning(scene: "Scene", node: bool = False) -> str | None:

@@ -11,10 +11,11 @@ from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ...physics.effects import EffortLimits
 from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
-from ...physics.model import BRIEF, ParameterError, brief
+from ...physics.model import ParameterError, brief
 from .recording_targets import rerun_path_problem, viewer_address_problem
-from ...usage import one_line
 from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError, coerce_value, load_scene
+# declared in spec.py; ParameterRefused, shorten and START are imported from here too
+from .spec import ANYTIME, KEPT, RESTART, START, ParameterRefused, ParameterSpec, shorten  # noqa: F401
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
@@ -22,48 +23,6 @@ MAX_WALL_PERIOD = 3600.0          # wall s between ticks: slower is no longer a 
 
 
 RECORDING = {"rerun_path": rerun_path_problem, "rerun_connect": viewer_address_problem}
-
-
-class ParameterRefused(ValueError):
-    """A parameter value the node will not take; str() names the parameter and the reason."""
-
-    def __init__(self, name: str, reason: str):
-        reason = shorten(one_line(reason))   # one log line, never a 100 KB one
-        super().__init__(f"parameter {brief(name, 60)} refused: {reason}")
-        self.name, self.reason = name, reason
-
-
-def shorten(text: str, limit: int = 3 * BRIEF) -> str:
-    """`text` cut to `limit` characters, saying how long it was."""
-    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} chars)"
-
-
-# When a parameter may change (main.py's --help prints it): the one place it is decided.
-START = "start only"                   # refused while running (START_ONLY)
-KEPT = "live, state kept"              # the physics changes from the next step (LIVE)
-RESTART = "live, restarts the scene"   # a Scene field: the scene restarts with it
-ANYTIME = "live"
-
-
-@dataclass(frozen=True)
-class ParameterSpec:
-    name: str
-    kind: str              # "str", "float", "bool", "float_pair", "str_list"
-    default: object        # a value, or a function scene -> value for scene-derived defaults
-    meaning: str
-    scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
-    effect: object = None       # an effect's key: the physics Parameter that checks it
-    when: str = ANYTIME         # START, KEPT, RESTART or ANYTIME
-
-    def default_for(self, scene: Scene):
-        return self.default(scene) if callable(self.default) else self.default
-
-    @property
-    def description(self) -> str:
-        """The meaning, and when it may change if not while running."""
-        if self.effect is not None:
-            return f"{self.meaning} ({'chosen at start' if self.when == START else 'changes live'})"
-        return self.meaning + ("; chosen at start" if self.when == START else "")
 
 
 def _from_scene(name):
