@@ -10,7 +10,6 @@ origin is 0 (`clock_origin` zero, as Gazebo's /clock) or the wall clock at start
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from math import isfinite
 
 from ..interface import NODE_NAME
@@ -160,7 +159,8 @@ class ArmSimCore(CommandInput):
         sim = self.sim
         before = (sim.state, sim.steps)
         self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
-        if sim.holding or not all(isfinite(v) for v in sim.state):
+        total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
+        if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
             self.recorder.hand_over()
@@ -170,7 +170,9 @@ class ArmSimCore(CommandInput):
                            f"{sim.time:.6f} s); holding until reset")
             self.recorder.event("integration not finite: holding", "error")
             return
-        self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
+        residual = abs(sim.residual())
+        if residual > self.max_abs_residual:      # as max() keeps it, NaN included
+            self.max_abs_residual = residual
 
     def stamp_ns(self) -> int:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
@@ -187,7 +189,7 @@ class ArmSimCore(CommandInput):
         if self.sim.scene.sensors is None:
             return truth
         r = self.sim.readings
-        return replace(truth, position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
+        return truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
 
     def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")

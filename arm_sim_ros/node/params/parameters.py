@@ -12,10 +12,9 @@ from ...physics.effects import EffortLimits
 from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
 from ...physics.model import ParameterError, brief
+from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError, load_scene
 from .recording_targets import rerun_path_problem, viewer_address_problem
-from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError, coerce_value, load_scene
-# declared in spec.py; ParameterRefused, shorten and START are imported from here too
-from .spec import ANYTIME, KEPT, RESTART, START, ParameterRefused, ParameterSpec, shorten  # noqa: F401
+from .values import ParameterRefused, coerce
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
@@ -23,6 +22,34 @@ MAX_WALL_PERIOD = 3600.0          # wall s between ticks: slower is no longer a 
 
 
 RECORDING = {"rerun_path": rerun_path_problem, "rerun_connect": viewer_address_problem}
+
+
+# When a parameter may change (main.py's --help prints it): the one place it is decided.
+START = "start only"                   # refused while running (START_ONLY)
+KEPT = "live, state kept"              # the physics changes from the next step (LIVE)
+RESTART = "live, restarts the scene"   # a Scene field: the scene restarts with it
+ANYTIME = "live"
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    name: str
+    kind: str              # "str", "float", "bool", "float_pair", "str_list"
+    default: object        # a value, or a function scene -> value for scene-derived defaults
+    meaning: str
+    scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
+    effect: object = None       # an effect's key: the physics Parameter that checks it
+    when: str = ANYTIME         # START, KEPT, RESTART or ANYTIME
+
+    def default_for(self, scene: Scene):
+        return self.default(scene) if callable(self.default) else self.default
+
+    @property
+    def description(self) -> str:
+        """The meaning, and when it may change if not while running."""
+        if self.effect is not None:
+            return f"{self.meaning} ({'chosen at start' if self.when == START else 'changes live'})"
+        return self.meaning + ("; chosen at start" if self.when == START else "")
 
 
 def _from_scene(name):
@@ -159,48 +186,6 @@ EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFEC
 def when_changed(name: str) -> str:
     """What setting `name` while the node runs does."""
     return SPECS[name].when
-
-
-SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
-               "float_or_pair": "float_or_pair"}
-
-
-# rcl reads an unquoted off (no, false ...) as a bool: a text parameter one of whose words
-# is `off` takes that bool back as the word (`-p estimate:=off`, as the scene file says it).
-FALSE_AS_TEXT = {"estimate": "off"}
-
-
-def coerce(spec: ParameterSpec, value):
-    """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
-    checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
-    kind, name = spec.kind, spec.name
-    if value is False and name in FALSE_AS_TEXT:
-        value = FALSE_AS_TEXT[name]
-    if spec.effect is not None:
-        # not set: the effect's default, or no effect at all. `ros2 param dump` writes a
-        # parameter not set as YAML null, which rcl reads back as the text "null".
-        if value is None or value == "null":
-            return None
-        try:
-            value = spec.effect.coerce(name.partition(".")[0], value)
-        except ParameterError as error:
-            raise ParameterRefused(name, str(error)) from None
-        return list(value) if isinstance(value, tuple) else value
-    if kind in SCENE_KINDS:
-        try:
-            value = coerce_value(name, SCENE_KINDS[kind], value)
-        except SceneError as error:
-            raise ParameterRefused(name, str(error)) from None
-        return list(value) if isinstance(value, tuple) else value
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise ParameterRefused(name, f"must be true or false, got {brief(value)}")
-        return value
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-        raise ParameterRefused(name, f"must be a list, got {brief(value)}")
-    if not all(isinstance(v, str) for v in value):
-        raise ParameterRefused(name, f"must be a list of text, got {brief(list(value))}")
-    return list(value)
 
 
 @dataclass(frozen=True)
