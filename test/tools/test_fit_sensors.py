@@ -14,6 +14,7 @@ from tools.test_fit import base_args, fit
 from tools.test_fit_reference import COUNTS, RATE, sensed_recording
 
 OFFSET = (0.02, -0.015)
+DURATION = 1.0       # s: the shortest the fit takes (two harmonics in 0.1-2 Hz); 4 s cost 57 s a test
 READ = ["--set", f"sensors.rate={RATE:g}", "--set", "sensors.velocity=differences",
         "--set", f"sensors.position_resolution={6.283185307179586 / COUNTS!r},"
                  f"{6.283185307179586 / COUNTS!r}"]
@@ -34,6 +35,11 @@ def write_bag(path, rec, commands: bool = False):
     return str(path)
 
 
+def read_late():
+    """The sensed recording whose readings are 3 ms late (one, cached, for every test here)."""
+    return sensed_recording(DURATION, sensor_delay=0.003, offset=OFFSET)[0]
+
+
 def found(outcome) -> dict:
     return {p["key"]: p for p in outcome["parameters"]}
 
@@ -45,8 +51,7 @@ def assert_within(parameter, truth, share=0.05):
 
 def test_a_3_ms_sensor_delay_and_the_encoder_offsets_are_found_within_5_percent(capsys,
                                                                                 tmp_path):
-    bag = write_bag(tmp_path / "read", sensed_recording(4.0, sensor_delay=0.003,
-                                                        offset=OFFSET)[0])
+    bag = write_bag(tmp_path / "read", read_late())
     outcome = fit(capsys, bag, *base_args(), *READ, "--free",
                   "sensors.delay,sensors.position_offset", "--starts", "1", "--workers", "1")
     keys = found(outcome)
@@ -57,7 +62,7 @@ def test_a_3_ms_sensor_delay_and_the_encoder_offsets_are_found_within_5_percent(
 
 
 def test_a_3_ms_command_delay_is_found_within_5_percent_from_the_commands(capsys, tmp_path):
-    bag = write_bag(tmp_path / "late", sensed_recording(4.0, sensor_delay=0.0,
+    bag = write_bag(tmp_path / "late", sensed_recording(DURATION, sensor_delay=0.0,
                                                         command_delay=0.003,
                                                         offset=OFFSET)[0], commands=True)
     outcome = fit(capsys, bag, *base_args(), *READ, "--set", f"sensors.position_offset="
@@ -68,13 +73,13 @@ def test_a_3_ms_command_delay_is_found_within_5_percent_from_the_commands(capsys
 
 def test_a_command_delay_is_refused_where_the_effort_is_the_torque_as_it_acts(capsys,
                                                                              tmp_path):
-    bag = write_bag(tmp_path / "read", sensed_recording(1.0)[0])
+    bag = write_bag(tmp_path / "read", read_late())
     line = fit(capsys, bag, *base_args(), "--free", "command_delay", code=2)
     assert "--torque-topic" in line
 
 
 @pytest.mark.parametrize("key", ["sensors.position_noise", "sensors.rate", "sensors.seed"])
 def test_sensor_keys_a_recording_does_not_identify_are_refused(capsys, tmp_path, key):
-    bag = write_bag(tmp_path / "read", sensed_recording(1.0)[0])
+    bag = write_bag(tmp_path / "read", read_late())
     line = fit(capsys, bag, *base_args(), "--free", key, code=2)
     assert "not a key a fit can free" in line and "sensors keys: position_offset, delay" in line
