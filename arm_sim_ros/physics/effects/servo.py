@@ -218,12 +218,7 @@ class Servo(Actuator):
     def beside(self, advance, f, z, h):
         """advance(f, z, h) under the shadow's held torque: the shadow follows the true motion,
         whose servo samples the true state, not the motion's."""
-        mine = self.held[:]
-        self.held[:] = self.shadow_held
-        try:
-            return advance(f, z, h)
-        finally:
-            self.held[:] = mine
+        return advanced_under(self.held, self.shadow_held, advance, f, z, h)
 
     def hold(self, q, joints=(0, 1)) -> None:
         """Set-points from the state: a position joint holds `q`, a velocity joint stops."""
@@ -248,6 +243,17 @@ class Servo(Actuator):
                 w = min(max(w, -self.integral_limit[i]), self.integral_limit[i])
             integrals.append(w)
         return tuple(integrals)
+
+
+def advanced_under(torque: list, other, advance, f, z, h):
+    """advance(f, z, h) with the list the generated code reads a torque from (`torque`) holding
+    `other` meanwhile: the error estimate's shadow stepped under its own torque."""
+    mine = torque[:]
+    torque[:] = other
+    try:
+        return advance(f, z, h)
+    finally:
+        torque[:] = mine
 
 
 def sample_grid(rate: float, step_size: float) -> tuple:

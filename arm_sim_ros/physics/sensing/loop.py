@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from ..effects.servo import Servo
+from ..effects.servo import Servo, advanced_under
 from .sensors import delay_steps
 
 
@@ -85,12 +85,7 @@ class Loop:
 
     def beside(self, advance, f, z, h):
         """advance(f, z, h) under the shadow's torque (Shadow.follow: its `sampled`)."""
-        mine = self.acting[:]
-        self.acting[:] = self.shadow_acting
-        try:
-            return advance(f, z, h)
-        finally:
-            self.acting[:] = mine
+        return advanced_under(self.acting, self.shadow_acting, advance, f, z, h)
 
     def _inputs(self) -> tuple:
         return (*self.given, *(self.servo.setpoint if self.servo is not None else ()))
