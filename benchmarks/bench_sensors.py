@@ -11,8 +11,9 @@ The full block is the issue's:
     seed 7, rate 500 Hz, 4096 counts, noise 1e-4 rad, velocity differences, delay 2 ms
     (+ command_delay 1 ms on the servo rows)
 
---before DIR times `release`'s step and run in a worker process on a checkout of the tree
-before sensors (`git archive 7c2cc95 | tar -x -C /tmp/before`):
+--before DIR times `release`'s step and run on a checkout of the tree before sensors (`git
+archive main | tar -x -C /tmp/before`, main not yet merged with this branch) and on this
+tree, each in a worker process of the same form, the two in turns:
 
     nice python benchmarks/bench_sensors.py [--steps 2000] [--repeat 15] [--before /tmp/before]
 """
@@ -24,7 +25,8 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
+HERE = Path(__file__).resolve()
+sys.path.insert(0, str(HERE.parent))   # the sibling benchmark scripts
 
 from bench_core import TreeWorker  # noqa: E402  (a worker on the tree before)
 
@@ -130,29 +132,32 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--repeat", type=int, default=15)
     parser.add_argument("--before", type=Path, metavar="DIR",
-                        help="a checkout of the tree before sensors (7c2cc95)")
+                        help="a checkout of the tree before sensors (main before the merge)")
     args = parser.parse_args()
     logging.disable(logging.WARNING)
     rows = slots(args.steps)
-    before = Before(args.before, args.steps) if args.before is not None else None
+    # the tree before and this one each in a worker of the same form, in turns, so that
+    # neither has the other's process (this one holds every row's simulator) or place
+    workers = () if args.before is None else (Before(args.before, args.steps),
+                                              Before(HERE.parents[1], args.steps))
     best = {name: float("inf") for name, _ in rows}
     for _ in range(2):                     # warm: compiled code, caches
         for name, measure in rows:
             measure()
-        if before is not None:
-            before.run()
-    if before is not None:
-        before.best = None
+        for worker in workers:
+            worker.run()
+    for worker in workers:
+        worker.best = None
     try:
         for r in range(args.repeat):
             turn = rows[r % len(rows):] + rows[:r % len(rows)]
-            if before is not None:
-                before.run()
+            for worker in workers[::1 if r % 2 else -1]:
+                worker.run()
             for name, measure in turn:
                 best[name] = min(best[name], measure())
     finally:
-        if before is not None:
-            before.close()
+        for worker in workers:
+            worker.close()
     print(f"µs per step (Simulator.step, Simulator.run) and per node tick (one step a tick, "
           f"publishing every step), h = {STEP:g} s; fastest of {args.repeat} rounds of "
           f"{args.steps}:")
@@ -162,10 +167,10 @@ def main() -> None:
         scene = label.partition(",")[0]
         plain = best.get(f"{kind}  {scene}, no sensors", us)
         print(f"{name:60s} {us:8.2f} {us / plain:13.2f}")
-    if before is not None:
-        step, run = before.best
-        now_step, now_run = best["step  release, no sensors"], best["run   release, no sensors"]
-        print(f"\nthe tree before sensors ({args.before}), release without sensors:")
+    if workers:
+        (step, run), (now_step, now_run) = (worker.best for worker in workers)
+        print(f"\nthe tree before sensors ({args.before}) and this one, each in a worker, in "
+              f"turns; release without sensors:")
         print(f"  step   before {step:6.2f} µs   now {now_step:6.2f} µs   now ÷ before "
               f"{now_step / step:5.2f}")
         print(f"  run    before {run:6.2f} µs   now {now_run:6.2f} µs   now ÷ before "
