@@ -77,7 +77,8 @@ def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers):
     fixed = [n for n in integrators if not INTEGRATORS[n].adaptive]
     adaptive = [n for n in integrators if INTEGRATORS[n].adaptive]
     plan = [(f"{n} h={h:g}, estimate {e}", lambda n=n, h=h, e=e: [
-        measure(scene, n, h, None, times, ref, e)]) for n in fixed for e in ESTIMATES for h in steps]
+        measure(scene, n, h, None, times, ref, e)])
+        for n in fixed for e in ESTIMATES for h in steps]
     plan += [(f"{n} tol={t:g}, estimate {e}", lambda n=n, t=t, e=e: [
         measure(scene, n, scene.step_size, t, times, ref, e)])
         for n in adaptive for e in ESTIMATES for t in tolerances]

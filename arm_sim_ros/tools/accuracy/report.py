@@ -103,8 +103,8 @@ def price_columns(result: dict, target: float) -> list:
         return [r for r in runs if r["kind"] == kind and h in (None, r["step_size"])]
     return [("ours as set", as_set),
             ("ours as set, the node's path", result.get("node")),
-            ("ours rk4 + tolerance", pick(result, target, [r for r in runs if r["kind"] ==
-                                                           "tolerance" and r["integrator"] == "rk4"])),
+            ("ours rk4 + tolerance", pick(result, target, [
+                r for r in runs if r["kind"] == "tolerance" and r["integrator"] == "rk4"])),
             ("ours, estimate global", pick(result, target, ours(result, "global"))),
             ("ours, estimate off", pick(result, target, ours(result, "off"))),
             ("MuJoCo best at h, mj_step", min(mujoco("mujoco", at_h), default=None,
@@ -223,7 +223,7 @@ def legend_labels(results) -> list:
             runs = [r for r in result["runs"] if r["series"] == name
                     and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
             if runs:
-                labels.setdefault(_label(name, runs[0]))
+                labels.setdefault(_label(name, runs[0], result["path"]))
     if any(result["peers"].get("mujoco", {}).get("floor") for result in results):
         labels.setdefault(FLOOR_LABEL)
     return list(labels) + [TARGET_LABEL]
@@ -246,7 +246,8 @@ def _style(name: str, kind: str, estimate: str | None = "global") -> dict:
             "linewidth": 1.4, "color": color, **hollow}
 
 
-def _label(name: str, run: dict) -> str:
+def _label(name: str, run: dict, path: str = "") -> str:
+    """The legend's words for a series; ours on another path than the panel's says which."""
     if run["kind"] == "mujoco":
         return f"MuJoCo {name[7:]}, h sweep (mj_step from Python)"
     if run["kind"] == "mujoco rollout":
@@ -256,7 +257,8 @@ def _label(name: str, run: dict) -> str:
     if run["kind"] == "tolerance":
         return f"ours {name} sweep, scene's h"
     sweep = "rtol = atol sweep" if run["tolerance"] is not None else "h sweep"
-    return f"ours {run['integrator']}, {sweep}, estimate {run['estimate']}"
+    other = f" ({run['path']})" if path and run["path"] != path else ""
+    return f"ours {run['integrator']}, {sweep}, estimate {run['estimate']}{other}"
 
 
 def panel(ax, result: dict) -> None:
@@ -267,8 +269,8 @@ def panel(ax, result: dict) -> None:
         if not runs:
             continue
         style = _style(name, runs[0]["kind"], runs[0]["estimate"])
-        ax.loglog([r["cpu_s_per_sim_s"] * 1e6 for r in runs],
-                  [r["max_state_error"] for r in runs], label=_label(name, runs[0]), **style)
+        ax.loglog([r["cpu_s_per_sim_s"] * 1e6 for r in runs], [r["max_state_error"] for r in runs],
+                  label=_label(name, runs[0], result["path"]), **style)
         if runs[0]["kind"] == "tolerance":          # which tolerance each point is
             labels += [(r["cpu_s_per_sim_s"] * 1e6, r["max_state_error"], r["tolerance"],
                         style["color"]) for r in runs]
@@ -277,6 +279,7 @@ def panel(ax, result: dict) -> None:
         ax.axhline(floor, label=FLOOR_LABEL, **FLOOR_LINE)
     ax.axhline(TARGET, label=TARGET_LABEL, **TARGET_LINE)
     label_tolerances(ax, labels)
+    decades(ax)
     ax.set_xlabel("CPU µs per simulated second (lower is cheaper)")
     ax.set_ylabel("max |state error| (rad, rad/s)")
     ax.set_title(f"{result['scene']} ({result['duration']:g} s; ours: Simulator.run, "
@@ -299,6 +302,15 @@ def label_tolerances(ax, labels) -> None:
         ax.annotate(f"{tolerance:g}", (x, y), fontsize=6.5, color=color,
                     textcoords="offset points", xytext=(-4 if left else 4, -2 if below else 2),
                     ha="right" if left else "left", va="top" if below else "bottom")
+
+
+def decades(ax) -> None:
+    """Only the decades labelled on an axis that spans one or more (matplotlib labels some
+    minor ticks too up to about two, and they ran into each other)."""
+    from matplotlib.ticker import NullFormatter
+    for axis, (low, high) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+        if high >= 10 * low:
+            axis.set_minor_formatter(NullFormatter())
 
 
 def _crowded(labelled, x: float, y: float) -> bool:
