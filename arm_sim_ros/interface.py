@@ -1,4 +1,4 @@
-"""The node's ROS 2 interface as data: its name, topics and diagnostic levels.
+"""The node's ROS 2 interface as data: its name, topics, services, action and diagnostic levels.
 
 Shared by the node, the recordings that write what the node publishes, and the tools
 that talk to it; it imports nothing.
@@ -15,6 +15,52 @@ JOINT_NAMES = ("shoulder_joint", "elbow_joint")   # as in urdf/two_link_arm.urdf
 JOINT_STATE = "sensor_msgs/msg/JointState"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+CLOCK = "rosgraph_msgs/msg/Clock"
+
+# Everything the node serves, by the name it resolves (relative: in the node's namespace;
+# `~/`: under the node's own name), with its type and what it carries. The reference
+# (docs/reference/node.md) is made from these, and a test holds the dds node on the wire to
+# exactly them.
+PUBLISHES = {
+    JOINT_STATES_TOPIC: (JOINT_STATE, "every tick: position (rad, unwrapped), velocity "
+                         "(rad/s) and effort (the torque the joints receive, N m), stamped "
+                         "with simulated time"),
+    "/clock": (CLOCK, "simulated time, every tick, equal to the JointState stamps "
+               "(publish_clock)"),
+    DIAGNOSTICS_TOPIC: (DIAGNOSTIC_ARRAY, "1 Hz: refused commands, real-time factor, energy "
+                        "balance residual, late ticks, the error estimate"),
+    "/parameter_events": ("rcl_interfaces/msg/ParameterEvent", "every accepted parameter change"),
+}
+SUBSCRIBES = {
+    COMMAND_TOPIC: (FLOAT64_MULTI_ARRAY, "[tau1, tau2] N m, held until the next one; zero "
+                    "after command_timeout"),
+    JOINT_COMMANDS_TOPIC: (JOINT_STATE, "commands by joint name, each joint taking the field "
+                           "of its interface (effort N m; position rad or velocity rad/s for "
+                           "a joint servo): what ros2_control's topic-based hardware sends"),
+    SETPOINT_TOPICS["position"]: (FLOAT64_MULTI_ARRAY, "[q1, q2] rad: set-points of the "
+                                  "position servos"),
+    SETPOINT_TOPICS["velocity"]: (FLOAT64_MULTI_ARRAY, "[qd1, qd2] rad/s: set-points of the "
+                                  "velocity servos"),
+}
+PARAMETER_SERVICES = ("describe_parameters", "get_parameter_types", "get_parameters",
+                      "list_parameters", "set_parameters", "set_parameters_atomically")
+SIMULATION = "simulation_interfaces/srv/"
+SERVICES = {
+    "~/reset": ("std_srvs/srv/Trigger", "restart the scene (stamps keep counting)"),
+    **{f"~/{name}": (f"rcl_interfaces/srv/{name.title().replace('_', '')}",
+                     "the node's parameters, as every ROS 2 node serves them")
+       for name in PARAMETER_SERVICES},
+    "get_simulator_features": (SIMULATION + "GetSimulatorFeatures", "what this simulator "
+                               "supports (ROS 2 Simulation Interfaces)"),
+    "get_simulation_state": (SIMULATION + "GetSimulationState", "playing, paused or stopped"),
+    "set_simulation_state": (SIMULATION + "SetSimulationState", "play, pause or stop"),
+    "step_simulation": (SIMULATION + "StepSimulation", "N ticks while paused"),
+    "reset_simulation": (SIMULATION + "ResetSimulation", "the scene from its start"),
+}
+ACTIONS = {
+    "simulate_steps": ("simulation_interfaces/action/SimulateSteps", "N ticks while paused, "
+                       "with feedback after each"),
+}
 # What the node publishes and takes, by absolute name (as a bag of it lists them).
 NODE_TOPICS = {"/" + JOINT_STATES_TOPIC: JOINT_STATE,
                "/" + COMMAND_TOPIC: FLOAT64_MULTI_ARRAY,

@@ -7,6 +7,20 @@ from __future__ import annotations
 import argparse
 import unicodedata
 
+# Exit codes of `arm-sim` and `arm_sim_node`, in one place (docs/reference/exit_codes.md).
+DONE, FAULT, REFUSED, STOPPED, BROKEN_PIPE = 0, 1, 2, 130, 141
+EXIT_CODES = {
+    DONE: "done (the node: also stopped by SIGINT or SIGTERM)",
+    FAULT: "the work failed: `arm-sim run` faulted (a step was refused: `fault` and "
+           "`refused_steps` in `--json`), `arm-sim fit` did not converge, `arm-sim send-torque` "
+           "found no subscriber",
+    REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "
+             "or half-written",
+    STOPPED: "`arm-sim` stopped by SIGINT, SIGTERM or SIGHUP; every output is closed at the "
+             "same last step (`interrupted_at` in `--json`)",
+    BROKEN_PIPE: "the reader of stdout went away (`| head`)",
+}
+
 
 class UsageError(ValueError):
     """Bad input on the command line or in a file; printed as one line, exit code 2."""

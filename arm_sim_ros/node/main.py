@@ -19,7 +19,7 @@ import time
 from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
-from ..usage import ArgumentParser, UsageError, one_line
+from ..usage import DONE, REFUSED, ArgumentParser, UsageError, one_line
 from .params.parameters import PARAMETERS, ParameterRefused, when_changed
 from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
                               node_parameters, parse_ros_args, split_ros_args)  # noqa: F401
@@ -141,9 +141,9 @@ def main(argv=None) -> int:
         return run_dds(ros_argv, args.duration, status, stop)
     except (UsageError, ParameterRefused, transports.TransportUnavailable) as error:
         print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
-        return 2
+        return REFUSED
     except KeyboardInterrupt:
-        return 0
+        return DONE
 
 
 def _print_status(line: str) -> None:

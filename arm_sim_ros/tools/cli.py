@@ -17,7 +17,8 @@ from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_n
 from ..recording.csv_file import CsvRecorder
 from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
-from ..usage import ArgumentParser, UsageError, one_line
+from ..usage import (BROKEN_PIPE, DONE, FAULT, REFUSED, STOPPED, ArgumentParser, UsageError,
+                     one_line)
 from .arguments import add_scene_arguments, scene_from_args
 from .run.confirmed import ConfirmedSteps
 from .progress import Progress
@@ -149,7 +150,7 @@ def cmd_run(args) -> int:
         print(f"arm-sim: interrupted ({stop.requested}) at t = {sim.time:.6f} s; every output "
               "ends at that step", file=sys.stderr)
     print(strict_json(result) if args.json else format_result(scene, result))
-    return 130 if stop.requested else 1 if sim.fault else 0
+    return STOPPED if stop.requested else FAULT if sim.fault else DONE
 
 
 def finish_all(recorders, sim) -> None:
@@ -220,18 +221,18 @@ def main(argv=None) -> int:
         return args.func(args)
     except (UsageError, SceneError, ParameterError) as error:
         print(f"arm-sim: error: {one_line(error)}", file=sys.stderr)
-        return 2
+        return REFUSED
     except KeyboardInterrupt:
-        return 130
+        return STOPPED
     except BrokenPipeError:
         # The reader went away (`arm-sim run | head -1`): stop quietly, as Unix tools do.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
+        return BROKEN_PIPE
     except OSError as error:
         where = f" {error.filename}" if error.filename else ""
         print(one_line(f"arm-sim: error: cannot write{where}: {error.strerror or error}"),
               file=sys.stderr)
-        return 2
+        return REFUSED
 
 
 if __name__ == "__main__":
