@@ -94,25 +94,26 @@ def pick(result: dict, target: float, runs: list) -> dict | None:
 
 
 def price_columns(result: dict, target: float) -> list:
-    """(label, run) per line of the price list for one scene."""
+    """(label, run) per line of the price list for one scene (MuJoCo's where it ran)."""
     runs = result["runs"]
     as_set = next((r for r in runs if r["kind"] == "as set"), None)
     at_h = as_set["step_size"] if as_set else None
 
     def mujoco(kind, h=None):
         return [r for r in runs if r["kind"] == kind and h in (None, r["step_size"])]
+    theirs = [] if not mujoco("mujoco") else [
+        ("MuJoCo best at h, mj_step", min(mujoco("mujoco", at_h), default=None,
+                                          key=lambda r: r["max_state_error"])),
+        ("MuJoCo best at h, rollout", min(mujoco("mujoco rollout", at_h), default=None,
+                                          key=lambda r: r["max_state_error"])),
+        ("MuJoCo, mj_step", pick(result, target, mujoco("mujoco"))),
+        ("MuJoCo, rollout", pick(result, target, mujoco("mujoco rollout")))]
     return [("ours as set", as_set),
             ("ours as set, the node's path", result.get("node")),
             ("ours rk4 + tolerance", pick(result, target, [
                 r for r in runs if r["kind"] == "tolerance" and r["integrator"] == "rk4"])),
             ("ours, estimate global", pick(result, target, ours(result, "global"))),
-            ("ours, estimate off", pick(result, target, ours(result, "off"))),
-            ("MuJoCo best at h, mj_step", min(mujoco("mujoco", at_h), default=None,
-                                              key=lambda r: r["max_state_error"])),
-            ("MuJoCo best at h, rollout", min(mujoco("mujoco rollout", at_h), default=None,
-                                              key=lambda r: r["max_state_error"])),
-            ("MuJoCo, mj_step", pick(result, target, mujoco("mujoco"))),
-            ("MuJoCo, rollout", pick(result, target, mujoco("mujoco rollout")))]
+            ("ours, estimate off", pick(result, target, ours(result, "off")))] + theirs
 
 
 def price_list(results: list, target: float) -> str:
