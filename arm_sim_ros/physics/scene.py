@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .. import yaml_files
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
+from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
@@ -60,6 +61,9 @@ class Scene:
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
     max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
+    # what a run computes of its own error (trust/unestimated.py): global (the shadow and
+    # its checks) or off (the steps alone: no error estimate, so tolerance 0)
+    estimate: str = "global"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -91,6 +95,13 @@ class Scene:
         if not self.tolerance >= 0:
             raise SceneError(f"tolerance = {self.tolerance} must be >= 0 (local error per "
                              "simulated second; 0: estimate only, never split a step)")
+        if self.estimate not in ESTIMATES:
+            raise SceneError(f"estimate {self.estimate!r} is unknown; choose global (the "
+                             "error estimate, the default) or off (none)")
+        if self.estimate == "off" and self.tolerance != 0:
+            raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
+                             f"tolerance = {self.tolerance:g}: set tolerance 0 with it "
+                             "(arm-sim run --estimate off does both)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from math import isfinite, nan
 
 from .trust import accuracy, guard
-from .compiled import build as compiled
+from .compiled import runs as compiled
 from . import model
 from .stepping import stability
 from .switching.events import switching as switching_for
@@ -315,12 +315,12 @@ def steppers(sim: Simulator, scene: Scene) -> None:
 def books_for(sim: Simulator, scene: Scene, step):
     """The error books (accuracy.py) of `step` (the simulator's, compiled where it can be),
     with the shadow's own switching stepper where the scene switches (it says nothing: its
-    switches are not the run's)."""
-    twin = sim.switching and switching_for(sim.dynamics, sim._tableau, step, sim.substeps,
-                                           lambda kind, message: None, lambda: 0.0)
+    switches are not the run's; none with `estimate` off: no shadow)."""
+    twin = sim.switching and scene.estimate != "off" and switching_for(
+        sim.dynamics, sim._tableau, step, sim.substeps, lambda kind, message: None, lambda: 0.0)
     return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
-                         int(scene.max_substeps), 4 + len(sim.extra), twin)
+                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate)
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:

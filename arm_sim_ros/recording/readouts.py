@@ -26,6 +26,7 @@ import numpy as np
 from ..physics import model
 from ..physics.effects import Effect
 from ..physics.stepping.integrators import INTEGRATORS
+from ..physics.trust.unestimated import NO_ESTIMATE
 
 # Each effect's stored energy as a part of E: the part's name in the books.
 STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
@@ -47,7 +48,10 @@ def stores_energy(effect) -> bool:
 
 def held_by(scene) -> str:
     """What holds a scene's local error: its tolerance (a scaled error per simulated
-    second), or for an embedded pair (dopri5) its rtol and atol."""
+    second), or for an embedded pair (dopri5) its rtol and atol; nothing where the scene's
+    estimate is off."""
+    if scene.estimate == "off":
+        return f"estimate off: {NO_ESTIMATE}"
     if INTEGRATORS[scene.integrator].adaptive:
         return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
     return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))"

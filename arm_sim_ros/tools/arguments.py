@@ -27,6 +27,9 @@ def scene_from_args(args, note=None) -> Scene:
     for key in ("tolerance", "max_substeps"):
         if getattr(args, key, None) is not None:
             scene = scene.replace(**{key: parse_value(key, getattr(args, key))})
+    if getattr(args, "estimate", None) is not None:   # off: and no tolerance, unless one is given
+        unset = args.estimate == "off" and getattr(args, "tolerance", None) is None
+        scene = scene.replace(estimate=args.estimate, **({"tolerance": 0.0} if unset else {}))
     scene = scene.with_text_overrides(getattr(args, "set", None) or [])
     warning = angle_warning(scene)
     if warning:

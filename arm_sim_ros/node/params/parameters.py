@@ -148,6 +148,9 @@ PARAMETERS = (
     _scene_spec("max_substeps", "float", "the most sub-steps the tolerance may ask of one step; "
                 "past it the step is taken at the cap and the node says so once; the node "
                 "refuses physics whose stability plan needs more"),
+    _scene_spec("estimate", "str", "what the run computes of its own error: global (the "
+                "error estimate, in diagnostics and the recording) or off (none: the steps "
+                "alone, cheaper; tolerance must then be 0)"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),

@@ -343,7 +343,7 @@ def with_last(books, sim) -> list:
 
 def start_line(sim) -> str:
     """The text-log line a run starts with: what runs, and what holds its error."""
-    estimate = ("" if sim.error_estimate == sim.error_estimate
+    estimate = ("" if sim.error_estimate == sim.error_estimate or sim.scene.estimate == "off"
                 else ", no error estimate: the simulator does not estimate these steps")
     return (f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
             f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "

@@ -10,7 +10,8 @@ it would. The last VALIDATION_FRACTION of each recording is held out.
 The simulator replays the recorded torque held over each sample interval (as the node
 holds a command), with the scene's own exact stick-slip friction and limits, at a fixed
 step (tolerance 0: no adaptive sub-steps, so the trajectory is a smooth function of the
-parameters between switches and finite differences are reproducible). Residuals are
+parameters between switches and finite differences are reproducible), and with no error
+estimate (estimate off: no shadow, no checks, which a rollout would only pay for). Residuals are
 (simulated - measured) / σ per channel, σ each channel's noise estimated from the data
 (noise_level), so the cost is a χ² and ~1 per residual at the noise level.
 
@@ -50,7 +51,7 @@ def replay_scene(base, mode: str, dt: float):
     """The scene that replays a recording's torque: the `effort` is what the joints received
     (no policy, limits or windings again); commands go through the scene's drive chain."""
     substeps = max(1, int(np.ceil(dt / base.step_size - 1e-9)))
-    changes = {"step_size": dt / substeps, "tolerance": 0.0,
+    changes = {"step_size": dt / substeps, "tolerance": 0.0, "estimate": "off",
                "initial_positions": (0.0, 0.0), "initial_velocities": (0.0, 0.0)}
     if mode == "effort":
         changes |= {"policy": "command", "effort_limits": None, "controller_model": None}
