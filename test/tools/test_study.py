@@ -103,7 +103,9 @@ def test_cheapest_picks_the_least_cpu_time_that_reaches_the_target():
 
 # The command.
 
-def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
+def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys, monkeypatch):
+    from arm_sim_ros.tools import progress
+    monkeypatch.setattr(progress, "QUIET_FOR", float("inf"))   # a loaded machine's wall time
     out_json, out_png = tmp_path / "r.json", tmp_path / "p.png"
     code = cli.main(["accuracy", "--duration", "0.5", "--integrators", "rk4", "midpoint", "dopri5",
                      "--steps", "0.01", "0.005", "--tolerances", "1e-8", "--tolerance-sweep",
@@ -111,7 +113,7 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
     assert code == 0
     captured = capsys.readouterr()
     assert "fitted order rk4" in captured.out and "dopri5" in captured.out
-    assert captured.err == ""                # work this short shows no progress
+    assert captured.err == ""                # nothing but progress goes to stderr
     data = json.loads(out_json.read_text())
     ours = {r["integrator"] for r in data["runs"] if not r["series"].startswith("mujoco")}
     assert ours == {"rk4", "midpoint", "dopri5"}

@@ -86,12 +86,13 @@ def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers):
     plan.append(("the node's path", lambda: [measure_node(scene, times, ref)]))
     notes = []
     swept = [n for n in fixed if INTEGRATORS[n].order >= SWEEP_MIN_ORDER]
-    if sweep and swept and not has_estimate(scene.replace(integrator=swept[0])):
+    if sweep and swept and not has_estimate(scene.replace(integrator=swept[0], tolerance=0.0,
+                                                          estimate="global")):
         notes.append("tolerance sweep: none (the stability plan refuses this scene's steps, "
                      "so they carry no error estimate and a tolerance does not act)")
         swept = []
     plan += [(f"{n} tolerance={t:g}", lambda n=n, t=t: [measure_simulator(
-        scene.replace(integrator=n, tolerance=t), times, ref, "tolerance")])
+        scene.replace(integrator=n, tolerance=t, estimate="global"), times, ref, "tolerance")])
         for n in swept for t in sweep]
     peer = {}
     if "mujoco" in peers:
@@ -122,16 +123,11 @@ def study(scene: Scene, duration: float, integrators, steps, tolerances, progres
     plan, notes, peer = plan_runs(scene, times, ref, integrators, steps, tolerances, sweep,
                                   peers)
     units = len(plan) * (1 + repeat)
-    priced, left_out = [], False
+    priced = []
     for i, (text, measured) in enumerate(plan):
         if progress:
             progress(i, units, f"{scene.name}: {text}")
-        found = [p for p in measured() if p is not None]
-        left_out |= not found
-        priced += found
-    if left_out:
-        notes.append("estimate off: not on a scene that switches modes (only Simulator.run "
-                     "locates switches, and it has no estimate off yet)")
+        priced += measured()
     timing.price(priced, repeat, times[-1] - times[0], progress and (
         lambda done, total: progress(len(plan) + done * len(plan) * repeat // total, units,
                                      f"{scene.name}: pricing")))

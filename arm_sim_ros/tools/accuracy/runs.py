@@ -19,10 +19,9 @@ from dataclasses import dataclass
 from math import ceil, isfinite, nan
 
 from ...physics import model
-from ...physics.compiled import build as compiled
 from ...physics.trust.accuracy import MAX_SUBSTEPS
-from ...physics.stepping import stability
-from ...physics.stepping.integrators import INTEGRATORS, step_for
+from ...physics.trust.unestimated import ESTIMATES  # noqa: F401  (ours run with each)
+from ...physics.stepping.integrators import INTEGRATORS
 from ...physics.scene import Scene, SceneError
 from ...physics.simulator import Simulator
 from . import mujoco_peer
@@ -36,7 +35,6 @@ HYBRID_STEP = 2.5e-4   # the largest step of the reference of scenes that switch
 # What a run is (Run.kind) and its line's name after the integrator's (Run.series).
 SERIES = {"method": "", "as set": " (scene as set)", "tolerance": " + tolerance",
           "node": " (scene as set, Simulator.step)", "mujoco": "", "mujoco rollout": " rollout"}
-ESTIMATES = ("global", "off")     # the scene key `estimate`: ours run with it and without
 OFF = ", estimate off"            # the series name of a run without
 MJ_STEP, ROLLOUT = "mj_step from Python", "mujoco.rollout"     # MuJoCo's paths
 
@@ -180,19 +178,18 @@ def series_of(integrator: str, kind: str, estimate: str | None) -> str:
 def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, times,
             ref, estimate: str = "global") -> Priced:
     """One method at one step size (an embedded pair: at one rtol = atol), the tolerance
-    off (0), with the error estimate or without."""
+    off (0), with the error estimate (`estimate` global: the estimate alone, which never
+    changes a step) or without (off): one trajectory at two prices."""
     tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
-    at = scene.replace(integrator=name, step_size=step_size, tolerance=0.0, **tolerances)
-    return measure_simulator(at, times, ref, "method", estimate)
+    at = scene.replace(integrator=name, step_size=step_size, tolerance=0.0, estimate=estimate,
+                       **tolerances)
+    return measure_simulator(at, times, ref, "method")
 
 
-def measure_simulator(scene: Scene, times, ref, kind: str = "as set",
-                      estimate: str = "global") -> Priced:
-    """The scene (its integrator, step and tolerance) through Simulator.run: sampled by run
-    up to each sample time, priced as one run over the whole duration; `kind` (a SERIES
-    key) names it."""
-    if estimate == "off":
-        return bare(scene, times, ref, kind)
+def measure_simulator(scene: Scene, times, ref, kind: str = "as set") -> Priced:
+    """The scene (its integrator, step, tolerance and estimate) through Simulator.run:
+    sampled by run up to each sample time, priced as one run over the whole duration; `kind`
+    (a SERIES key) names it."""
     sim = Simulator(scene)
     interval = times[1] - times[0] if len(times) > 1 else 0.0
     samples, residual = [sim.state], 0.0
@@ -206,20 +203,20 @@ def measure_simulator(scene: Scene, times, ref, kind: str = "as set",
     if not held and sim.state != final:
         raise RuntimeError(f"{scene.name}: Simulator.run over {duration:g} s in one call ended "
                            "apart from the run sampled up to each sample time")
-    return Priced(simulator_run(sim, scene, samples, ref, residual, substeps, kind, "global",
-                                held), lambda: sim.run(duration), sim.reset)
+    return Priced(simulator_run(sim, scene, samples, ref, residual, substeps, kind, held),
+                  lambda: sim.run(duration), sim.reset)
 
 
 def simulator_run(sim: Simulator, scene: Scene, samples, ref, residual: float, substeps,
-                  kind: str, estimate: str, held=False) -> Run:
+                  kind: str, held=False) -> Run:
     """The Run of a simulator's samples of `scene`."""
     state_error, drift = errors(sim, samples, ref)
     adaptive = INTEGRATORS[scene.integrator].adaptive
     tolerance = scene.rtol if adaptive else None if kind == "method" else scene.tolerance
     return Run(scene.integrator, scene.step_size, tolerance, state_error, drift,
-               float("inf") if held else residual, series=series_of(scene.integrator, kind,
-                                                                     estimate),
-               substeps=substeps, kind=kind, path=sim.path, estimate=estimate)
+               float("inf") if held else residual, series=series_of(
+                   scene.integrator, kind, scene.estimate),
+               substeps=substeps, kind=kind, path=sim.path, estimate=scene.estimate)
 
 
 def measure_node(scene: Scene, times, ref) -> Priced:
@@ -229,72 +226,13 @@ def measure_node(scene: Scene, times, ref) -> Priced:
     every, total = cadence(scene, times)
     samples, residual = stepped(sim, len(times) - 1, every)
     run = simulator_run(sim, scene, samples, ref, residual, sim.substeps_taken, "node",
-                        "global", sim.refused_steps or sim.diverged)
+                        sim.refused_steps or sim.diverged)
 
     def go():
         step = sim.step
         for _ in range(total):
             step()
     return Priced(run, go, sim.reset)
-
-
-def bare(scene: Scene, times, ref, kind: str) -> Priced | None:
-    """Estimate off, until the scene key `estimate` lands: the scene's planned steps and
-    nothing else (no books, shadow, checks or residual), the tableau step at the stability
-    plan's sub-steps in a loop, compiled where the run's path is (kernels.bare); None where
-    the scene switches modes (only Simulator.run locates switches)."""
-    sim = Simulator(scene.replace(tolerance=0.0))
-    if sim.switching is not None:
-        return None
-    step = step_for(INTEGRATORS[scene.integrator], len(sim.channels), sim.dynamics.decay,
-                    rtol=scene.rtol, atol=scene.atol)
-    n, f, h = max(1, sim.substeps), sim.dynamics.function, scene.step_size
-    advance = stability.substepping(step, n)
-    every, total = cadence(scene, times)
-    y = y0 = sim.state
-    samples, residual = [y0], 0.0
-    try:
-        for k in range(1, total + 1):
-            y = sim.state = advance(f, y, h)
-            residual = max(residual, abs_residual(sim))
-            if k % every == 0:
-                samples.append(y)
-    except (ValueError, OverflowError, ZeroDivisionError):   # cos(inf), inf ** 2
-        residual = float("inf")
-    samples += [(float("inf"),) * len(y0)] * (len(times) - len(samples))
-    sim.state = y0
-
-    def go():
-        y = y0
-        for _ in range(total):
-            y = advance(f, y, h)
-    go = compiled_bare(sim, step, n, total, samples[-1]) or go
-    run = simulator_run(sim, scene, samples, ref, residual, sim.substeps * total
-                        if n > 1 else 0, kind, "off")
-    run.path = getattr(go, "path", "python")
-    return Priced(run, go)
-
-
-def compiled_bare(sim: Simulator, step, n: int, total: int, final):
-    """go(): `total` steps of n sub-steps in one compiled call (kernels.bare, the compiled
-    limit), where the scene compiles, else None; it must end where the Python loop did."""
-    if not compiled.compilable(sim.dynamics, step):
-        return None
-    import numpy as np
-    source, names = compiled.module_source(sim.dynamics, step)
-    module = compiled.load(source)
-    K = compiled.constants_of(names, {**sim.dynamics.function.__globals__,
-                                      **getattr(step, "constants", {})})
-    y0, h = np.array(sim.state, dtype=float), sim.step_size / n
-    y = y0.copy()
-    module.bare(y, h, total * n, K)
-    if all(isfinite(v) for v in final) and tuple(y.tolist()) != tuple(final):
-        raise RuntimeError(f"{sim.scene.name}: the compiled loop ended apart from Python's")
-
-    def go():
-        module.bare(y0.copy(), h, total * n, K)
-    go.path = compiled.Kernel.path
-    return go
 
 
 def measure_mujoco(scene: Scene, integrator: str, step_size: float, times,
