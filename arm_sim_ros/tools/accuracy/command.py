@@ -201,7 +201,8 @@ def cmd_accuracy(args) -> int:
     if "mujoco" in peers and mujoco_peer.available():
         print(f"peers: {mujoco_peer.available()}; the study goes on without it", flush=True)
     results = []
-    with Progress(1.0, "arm-sim accuracy", unit="runs") as progress:
+    # a pass: a run measured, or priced in one of the --repeat rounds
+    with Progress(1.0, "arm-sim accuracy", unit="passes") as progress:
         for k, scene in enumerate(scenes):
             def tell(done, total, label, k=k):
                 progress.total = total * len(scenes)
