@@ -100,8 +100,8 @@ class Scene:
                              "error estimate, the default) or off (none)")
         if self.estimate == "off" and self.tolerance != 0:
             raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
-                             f"tolerance = {self.tolerance:g}: set tolerance 0 with it "
-                             "(arm-sim run --estimate off does both)")
+                             f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
+                             "out (estimate off alone sets it to 0)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
@@ -168,6 +168,8 @@ class Scene:
                 merged[key] = value
             else:
                 raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+        if merged.get("estimate") == "off" and "tolerance" not in merged:
+            merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
 
     def with_text_overrides(self, assignments) -> "Scene":

@@ -24,12 +24,11 @@ def scene_from_args(args, note=None) -> Scene:
         scene = dataclass_replace(on_urdf, name=f"{scene.name} on {Path(args.urdf).name}")
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
-    for key in ("tolerance", "max_substeps"):
-        if getattr(args, key, None) is not None:
-            scene = scene.replace(**{key: parse_value(key, getattr(args, key))})
-    if getattr(args, "estimate", None) is not None:   # off: and no tolerance, unless one is given
-        unset = args.estimate == "off" and getattr(args, "tolerance", None) is None
-        scene = scene.replace(estimate=args.estimate, **({"tolerance": 0.0} if unset else {}))
+    overrides = {key: parse_value(key, getattr(args, key)) for key in ("tolerance", "max_substeps")
+                 if getattr(args, key, None) is not None}
+    if getattr(args, "estimate", None) is not None:   # off alone: tolerance 0 (Scene.replace)
+        overrides["estimate"] = args.estimate
+    scene = scene.replace(**overrides)
     scene = scene.with_text_overrides(getattr(args, "set", None) or [])
     warning = angle_warning(scene)
     if warning:

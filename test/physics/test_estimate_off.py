@@ -18,13 +18,21 @@ def test_the_estimate_is_global_unless_a_scene_says_off():
     assert load_scene("release").replace(estimate="off", tolerance=0.0).estimate == "off"
 
 
-def test_estimate_off_with_a_tolerance_is_refused_in_one_line():
+def test_estimate_off_alone_sets_the_tolerance_to_0():
+    """A scene file, `--set estimate=off` or `-p estimate:=off` that names no tolerance beside
+    it means no tolerance: there is no estimate to hold one to."""
+    assert load_scene("release").replace(estimate="off").tolerance == 0.0
+    assert load_scene("release").with_text_overrides(["estimate=off"]).tolerance == 0.0
+
+
+def test_estimate_off_with_a_tolerance_named_beside_it_is_refused_in_one_line():
     with pytest.raises(SceneError) as refused:
-        load_scene("release").replace(estimate="off")
+        load_scene("release").replace(estimate="off", tolerance=1e-6)
     message = str(refused.value)
     assert "\n" not in message
     assert message == ("estimate off computes no error estimate, so it cannot hold tolerance "
-                       "= 5e-05: set tolerance 0 with it (arm-sim run --estimate off does both)")
+                       "= 1e-06: set tolerance 0, or leave it out (estimate off alone sets it "
+                       "to 0)")
 
 
 def test_an_unknown_estimate_is_refused_naming_the_choices():

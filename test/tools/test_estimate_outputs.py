@@ -40,7 +40,7 @@ def test_the_text_result_of_an_off_run_says_it_carries_no_error_estimate(capsys)
     assert out.splitlines()[-1] == f"error estimate: none (estimate off: {NO_ESTIMATE})"
 
 
-@pytest.mark.parametrize("argv", [["--set", "estimate=off"],
+@pytest.mark.parametrize("argv", [["--set", "estimate=off", "--set", "tolerance=1e-6"],
                                   ["--estimate", "off", "--tolerance", "1e-6"],
                                   ["--estimate", "off", "--set", "tolerance=1e-6"]])
 def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
@@ -49,9 +49,10 @@ def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
     assert err.count("\n") == 1 and "estimate off computes no error estimate" in err
 
 
-def test_estimate_off_with_tolerance_0_given_runs(capsys):
-    code, out, _ = run_cli(capsys, "run", "--duration", "0.1", "--set", "estimate=off",
-                           "--set", "tolerance=0", "--json")
+@pytest.mark.parametrize("argv", [["--set", "estimate=off"],
+                                  ["--set", "estimate=off", "--set", "tolerance=0"]])
+def test_estimate_off_alone_or_with_tolerance_0_runs(capsys, argv):
+    code, out, _ = run_cli(capsys, "run", "--duration", "0.1", *argv, "--json")
     assert code == 0 and json.loads(out)["estimate"] == "off"
 
 

@@ -150,7 +150,7 @@ PARAMETERS = (
                 "refuses physics whose stability plan needs more"),
     _scene_spec("estimate", "str", "what the run computes of its own error: global (the "
                 "error estimate, in diagnostics and the recording) or off (none: the steps "
-                "alone, cheaper; tolerance must then be 0)"),
+                "alone, cheaper; it sets tolerance to 0)"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),
@@ -203,10 +203,17 @@ SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node ki
                "float_or_pair": "float_or_pair"}
 
 
+# rcl reads an unquoted off (no, false ...) as a bool: a text parameter one of whose words
+# is `off` takes that bool back as the word (`-p estimate:=off`, as the scene file says it).
+FALSE_AS_TEXT = {"estimate": "off"}
+
+
 def coerce(spec: ParameterSpec, value):
     """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
     checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
     kind, name = spec.kind, spec.name
+    if value is False and name in FALSE_AS_TEXT:
+        value = FALSE_AS_TEXT[name]
     if spec.effect is not None:
         # not set: the effect's default, or no effect at all. `ros2 param dump` writes a
         # parameter not set as YAML null, which rcl reads back as the text "null".
@@ -325,6 +332,8 @@ def _load(name: str) -> Scene:
 
 def _build(values: dict, load, changed) -> NodeConfig:
     values = {name: coerce(SPECS[name], values[name]) for name in SPECS}
+    if values["estimate"] == "off" and "estimate" in changed and "tolerance" not in changed:
+        values["tolerance"] = 0.0        # as in a scene: estimate off alone, no tolerance
     base = load(values["scene"])
     scene_values = {name: values[name] for name in SCENE_PARAMETERS if name in FIELD_KINDS}
     for effect, keys in EFFECT_GROUPS.items():   # a key not set leaves it to the effect
