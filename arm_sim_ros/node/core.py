@@ -159,7 +159,8 @@ class ArmSimCore(CommandInput):
         sim = self.sim
         before = (sim.state, sim.steps)
         self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
-        if sim.holding or not all(isfinite(v) for v in sim.state):
+        total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
+        if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
             self.recorder.hand_over()
@@ -169,7 +170,9 @@ class ArmSimCore(CommandInput):
                            f"{sim.time:.6f} s); holding until reset")
             self.recorder.event("integration not finite: holding", "error")
             return
-        self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
+        residual = abs(sim.residual())
+        if residual > self.max_abs_residual:      # as max() keeps it, NaN included
+            self.max_abs_residual = residual
 
     def stamp_ns(self) -> int:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)

@@ -5,12 +5,12 @@ The diagnostic keys are one list, used by the node and by `arm-sim run --bag`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..physics.trust.unestimated import NO_ESTIMATE
 
 
-@dataclass(frozen=True)
-class JointStateData:
+class JointStateData(NamedTuple):   # one a tick: a tuple is built in a third of the time
     stamp_ns: int
     frame_id: str
     name: list

@@ -11,13 +11,16 @@ from __future__ import annotations
 import logging
 import time
 
-from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+from cyclonedds._clayer import ddspy_write
+from cyclonedds.core import (DDSException, InstanceState, ReadCondition, SampleState, ViewState,
+                             WaitSet)
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ..wire import messages as msg
+from ..wire.cdr import clock_cdr, joint_state_bytes
 from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
@@ -36,10 +39,13 @@ def _stamp(stamp_ns: int) -> msg.Time:
     return msg.Time(*split_stamp(stamp_ns))
 
 
-def to_joint_state(data: JointStateData) -> msg.JointState:
-    return msg.JointState(header=msg.Header(stamp=_stamp(data.stamp_ns), frame_id=data.frame_id),
-                          name=list(data.name), position=data.position, velocity=data.velocity,
-                          effort=data.effort)
+def write_cdr(writer: DataWriter, data: bytes) -> None:
+    """DataWriter.write of a sample serialized already (cdr.py): what cyclonedds-python
+    11.0.1's write does once its sample.serialize() has run (pub.py), with no sample built:
+    the node writes a JointState and a Clock every tick."""
+    result = ddspy_write(writer._ref, data)
+    if result < 0:
+        raise DDSException(result, f"Occurred while writing sample in {writer!r}")
 
 
 def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
@@ -119,8 +125,9 @@ class DdsArmSimNode:
     def take_commands(self, timeout: float = 0.0) -> int:
         """Hand every waiting command to the core, waiting up to `timeout` s for the first.
         Returns how many arrived (refused ones included)."""
-        if timeout > 0:
-            self._command_ready.wait(duration(seconds=timeout))
+        # one look at the read conditions, instead of a take on every reader each tick
+        if not self._command_ready.wait(duration(seconds=timeout) if timeout > 0 else 0):
+            return self._publish_lockstep()
         count = 0
         for sample in self.command_reader.take(N=256):
             if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
@@ -136,6 +143,9 @@ class DdsArmSimNode:
                 self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
                                                  sample.effort)
                 count += 1
+        return self._publish_lockstep(count)
+
+    def _publish_lockstep(self, count: int = 0) -> int:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
             self._publish(data)
         return count
@@ -151,9 +161,13 @@ class DdsArmSimNode:
         return data
 
     def _publish(self, data: JointStateData) -> None:
-        self.joint_state_writer.write(to_joint_state(data))
+        """joint_states and /clock, serialized straight from the data (cdr.py: the bytes a
+        messages.JointState and messages.Clock serialize to, with neither built)."""
+        sec, nanosec = split_stamp(data.stamp_ns)
+        write_cdr(self.joint_state_writer, joint_state_bytes(
+            sec, nanosec, data.frame_id, data.name, data.position, data.velocity, data.effort))
         if self.core.config.values["publish_clock"]:
-            self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
+            write_cdr(self.clock_writer, clock_cdr(sec, nanosec))
 
     def _publish_clock(self) -> None:
         """The current time on /clock: at start, and while lockstep waits for a command."""

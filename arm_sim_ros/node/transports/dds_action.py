@@ -229,9 +229,10 @@ class DdsSimulateSteps:
     def advance(self) -> None:
         """One tick of the executing goal and its feedback; the status list when it changed;
         the results waited for, of goals that finished."""
-        if self.goals is None:
-            return
-        goal = self.goals.advance(listening=bool(msg.matched(self.feedback_writer)))
+        goals = self.goals
+        if goals is None or not (goals.goals or goals.changed or self.waiting):
+            return                  # no goal: the node polls here every tick, and goes on
+        goal = goals.advance(listening=bool(msg.matched(self.feedback_writer)))
         if goal is not None:
             self.feedback_writer.write(FeedbackMessage(UUID(list(goal.goal_id)), Feedback(
                 goal.completed, goal.remaining)))

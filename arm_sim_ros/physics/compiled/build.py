@@ -26,6 +26,7 @@ import inspect
 import os
 import re
 import sys
+from functools import lru_cache, partial
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
@@ -34,10 +35,11 @@ from .kernels import KERNELS
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
 from ..model import MAX_ANGLE
 
-try:                      # the optional extra: pip install -e '.[fast]'
+try:              # in the default install where numba has a wheel (scripts/venv.bash)
     import numba
-except ImportError:       # pragma: no cover - exercised where numba is absent
-    numba = None
+except Exception as error:   # absent, or installed and broken (an llvmlite without its library)
+    numba, MISSING = None, f"{type(error).__name__}: {error}"
+_say_once = lru_cache(maxsize=None)(partial(print, file=sys.stderr))   # a line, once a process
 
 # Energy each effect stores (effects' stored_energy, the same operations in the same order:
 # squares as products, since Python's x ** 2 is libm's pow, 1 ulp off numba's x * x in about
@@ -81,8 +83,13 @@ STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_mode
 
 
 def available() -> bool:
-    """numba imports, ARM_SIM_COMPILED is not 0 and the cache directory is writable."""
-    if numba is None or os.environ.get("ARM_SIM_COMPILED", "1") == "0":
+    """numba imports (else one line says why), ARM_SIM_COMPILED is not 0, the cache writable."""
+    if os.environ.get("ARM_SIM_COMPILED", "1") == "0":
+        return False
+    if numba is None:
+        _say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
+                  "slower with the same numbers; `pip install numba==0.68.1` gives the "
+                  "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
         return False
     try:
         cache_dir().mkdir(parents=True, exist_ok=True)
