@@ -15,8 +15,8 @@ a sweep of the scene key `tolerance` for the fixed-step methods of order >= 3, a
 node's path (the scene as set through `Simulator.step`, a Python call per step). MuJoCo's
 integrators run the same scene at the same step sizes (mujoco_peer.py), priced twice: mj_step
 in a Python loop and mujoco.rollout. A run's price is the CPU time of the whole run, the
-fastest of --repeat rounds over every run of the scene in turn (timing.py), so that the same
-trajectory costs the same in every series. Scenes that switch modes (friction, joint limits)
+fastest of its calls over --repeat rounds in which every run of the scene is called in turn,
+call by call (timing.py), so that the same trajectory costs the same in every series. Scenes that switch modes (friction, joint limits)
 have a reference that locates every switch (independent.py, runs.hybrid_reference).
 """
 from __future__ import annotations

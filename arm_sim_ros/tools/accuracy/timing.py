@@ -1,13 +1,23 @@
-"""How the accuracy study prices its runs: CPU time of one whole run as a user makes it,
-prepared untimed, the fastest of several, taken in rounds over every run of a scene in turn
-(interleaved), so that a load that comes and goes on a shared machine falls on every run
-alike and two runs of the same work are priced alike.
+"""How the accuracy study prices its runs: the CPU time of one whole run as a user makes it
+(prepared untimed, the garbage collector off), the fastest of many calls. The runs of a scene
+are called in turn, one call each, over and over (interleaved call by call, in rounds), so
+that whatever the machine does meanwhile falls on every run alike and two runs of the same
+work are priced alike.
+
+Call by call, not each run back to back for its share of a round: on a shared machine a
+core's speed comes and goes in spells of tens of milliseconds (another process on its
+sibling), and a run taken whole within a slow spell never saw a fast one. On damped_release's
+one trajectory in seven series (test_study), at a load of 5 to 6 on 2 cores, back to back
+priced it at 93-177 µs per simulated second (1.89x) and 94-142 (1.50x); call by call, in the
+same process between them, 93-96 (1.04x) and 95-97 (1.02x).
+The fastest call, not the median: the median moves with the load (103-121, then 182-190 µs/s
+in the next run) where the fastest stays (93-115).
 """
 from __future__ import annotations
 
+import gc
 import time
 from dataclasses import dataclass, field
-from math import inf
 from typing import Callable
 
 ROUND_CPU_S = 0.01      # per run and round: short runs are taken again until this much
@@ -21,31 +31,36 @@ class Priced:
     run: object
     go: Callable[[], object]
     prepare: Callable[[], object] = lambda: None
-    best: float = field(default=inf)        # CPU seconds of the fastest go() so far
+    calls: list = field(default_factory=list)     # CPU seconds of each go() so far
 
     def once(self) -> float:
+        """CPU seconds of one go(), the garbage collector off meanwhile (as timeit does: its
+        passes cost what the study's other runs hold, not what this one does)."""
         self.prepare()
-        start = time.process_time()
-        self.go()
-        return time.process_time() - start
-
-    def take(self) -> None:
-        """One round: go() at least once and for at least ROUND_CPU_S, keeping the fastest."""
-        spent = 0.0
-        while True:
-            elapsed = self.once()
-            self.best, spent = min(self.best, elapsed), spent + elapsed
-            if spent >= ROUND_CPU_S:
-                return
+        collecting = gc.isenabled()
+        gc.disable()
+        try:
+            start = time.process_time()
+            self.go()
+            return time.process_time() - start
+        finally:
+            if collecting:
+                gc.enable()
 
 
 def price(priced: list[Priced], rounds: int, duration: float, tell=None) -> None:
-    """Each run's CPU seconds per simulated second: the fastest of `rounds` rounds over all
-    of them in turn; `tell(done, total)` after each run of each round."""
+    """Each run's CPU seconds per simulated second, the fastest of its calls. In each of
+    `rounds` rounds every run is called in turn, one call each, again and again until it has
+    spent ROUND_CPU_S in the round (a long run: once); `tell(done, total)` as runs finish
+    their round."""
     for r in range(rounds):
-        for i, p in enumerate(priced):
-            p.take()
+        spent, left = [0.0] * len(priced), list(range(len(priced)))
+        while left:
+            for i in left:
+                priced[i].calls.append(priced[i].once())
+                spent[i] += priced[i].calls[-1]
+            left = [i for i in left if spent[i] < ROUND_CPU_S]
             if tell:
-                tell(r * len(priced) + i + 1, rounds * len(priced))
+                tell(r * len(priced) + len(priced) - len(left), rounds * len(priced))
     for p in priced:
-        p.run.cpu_s_per_sim_s = p.best / duration if duration > 0 else 0.0
+        p.run.cpu_s_per_sim_s = min(p.calls) / duration if duration > 0 else 0.0
