@@ -4,7 +4,8 @@ off alone sets the tolerance to 0, at start and live, as a scene file does."""
 import pytest
 
 from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.node.params.ros_args import node_parameters, parse_ros_args
 
 

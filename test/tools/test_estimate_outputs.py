@@ -93,9 +93,11 @@ def test_the_node_takes_estimate_as_a_parameter_and_its_diagnostics_say_off():
 
 def test_the_node_refuses_estimate_off_beside_a_tolerance_naming_the_parameter():
     with pytest.raises(node_params.ParameterRefused) as refused:
-        node_params.resolve_parameters({"estimate": "off"})
-    assert refused.value.name == "estimate"
+        node_params.resolve_parameters({"estimate": "off", "tolerance": 5e-05})
+    assert refused.value.name == "tolerance"          # the one to set to 0 or leave out
     assert "cannot hold tolerance = 5e-05" in refused.value.reason
+    alone = node_params.resolve_parameters({"estimate": "off"})    # off alone: no tolerance
+    assert alone.scene.estimate == "off" and alone.scene.tolerance == 0.0
     config = node_params.resolve_parameters({"scene": "damped_release"})
     assert config.with_changes({"tolerance": 0.0, "estimate": "off"}).scene.estimate == "off"
     assert load_scene("damped_release").estimate == "global"

@@ -7,7 +7,8 @@ import math
 import pytest
 
 from arm_sim_ros.node import main as node_main
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.node.params.ros_args import rcl_scalar
 from arm_sim_ros.physics.model import arithmetic_fault
 from arm_sim_ros.physics.scene import SceneError, load_scene

@@ -24,8 +24,9 @@ from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_T
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..services.parameter_services import could_not_apply
-from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused,
-                                 resolve_parameters, scene_defaults)
+from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, resolve_parameters,
+                                 scene_defaults)
+from ..params.values import ParameterRefused
 from ..schedule import TickSchedule
 from ..services.simulation import SimulationControl
 from ..wire.cdr import clock_cdr, joint_state_bytes

@@ -17,7 +17,8 @@ from time import perf_counter, time_ns
 
 from ...interface import ERROR, NODE_TOPICS, OK, WARN
 from ...node.core import diagnostic_values
-from ...node.params.parameters import ParameterRefused, steps_per_tick
+from ...node.params.parameters import steps_per_tick
+from ...node.params.values import ParameterRefused
 from ...recording.bags.bag import (BagError, BagWriter, diagnostic_array, joint_state,
                                    torque_command)
 from ..arguments import scene_from_args
