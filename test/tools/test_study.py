@@ -356,7 +356,7 @@ def test_the_same_trajectory_costs_the_same_in_every_series():
     second in one series and 1967 in another; now each is Simulator.run over the whole run,
     priced call by call in interleaved rounds, the fastest of its calls: within 1.5x."""
     result = study.study(load_scene("damped_release"), 2.0, ["rk4", "exponential_rk4"],
-                         [0.01, 0.005], [], sweep=[1e-2, 1e-3, 1e-6], repeat=7)
+                         [0.01], [], sweep=[1e-2, 1e-3], repeat=7)
     groups = same_trajectory(result)
     trajectory = f"{series(result, 'rk4')[0]['max_state_error']:.9e}"
     shared = groups[("global", trajectory)]
