@@ -5,11 +5,11 @@ that whatever the machine does meanwhile falls on every run alike and two runs o
 work are priced alike.
 
 Call by call, not each run back to back for its share of a round: on a shared machine a
-core's speed comes and goes in spells of tens of milliseconds (another process on its
-sibling), and a run taken whole within a slow spell never saw a fast one. On damped_release's
-one trajectory in seven series (test_study), at a load of 5 to 6 on 2 cores, back to back
-priced it at 93-177 µs per simulated second (1.89x) and 94-142 (1.50x); call by call, in the
-same process between them, 93-96 (1.04x) and 95-97 (1.02x).
+core's speed comes and goes in spells (another process on its sibling), and a run taken whole
+within a slow spell never saw a fast one. On damped_release's one trajectory in seven series
+of 15 runs (test_study), at a load of 5 to 6 on 2 cores, back to back priced it at 93-177 µs
+per simulated second (1.89x) and 94-142 (1.50x); call by call, in the same process between
+them, 93-96 (1.04x) and 95-97 (1.02x).
 The fastest call, not the median: the median moves with the load (103-121, then 182-190 µs/s
 in the next run) where the fastest stays (93-115).
 """
