@@ -5,9 +5,8 @@ import sys
 from dataclasses import replace as dataclass_replace
 from pathlib import Path
 
-from ..physics.scene import (Scene, SceneError, angle_warning, changed_values, load_scene,
-                             parse_value)
-from ..physics.urdf.read import read_urdf
+from ..physics.scene import Scene, SceneError, angle_warning, load_scene, parse_value
+from ..physics.urdf.read import changed_values, read_urdf
 
 
 def scene_from_args(args, note=None) -> Scene:
