@@ -79,7 +79,10 @@ def test_joint_state_effort_commands_drive_the_arm_by_joint_name():
     writer.write(effort_command(["elbow_joint", "shoulder_joint"], [0.25, 1.0]))
     assert node.take_commands(timeout=TIMEOUT) == 1
     assert node.core.command == (1.0, 0.25)
-    writer.write(msg.JointState(name=["shoulder_joint"], position=[0.3]))   # not torque
+    writer.write(msg.JointState(name=["shoulder_joint"], position=[0.3]))   # ignored: effort
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    assert node.core.refused_commands == 0 and node.core.command == (1.0, 0.25)
+    writer.write(msg.JointState(name=["shoulder_joint"], effort=[80.0]))    # beyond the limit
     assert node.take_commands(timeout=TIMEOUT) == 1
     assert node.core.refused_commands == 1 and node.core.command == (1.0, 0.25)
 
