@@ -16,7 +16,7 @@ from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, changed_values, load_scene
 from ..physics.urdf.read import read_urdf
-from ..physics.simulator import Simulator
+from ..physics.simulator import ROUTINE, Simulator
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -69,8 +69,10 @@ class ArmSimCore(CommandInput):
     def _on_sim_event(self, event) -> None:
         """What the simulator does later reaches the log as it happens (a fault: _advance)."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
-            (self.log.info if event.kind == "switch" else self.log.error)(text)
+        if event.kind in ROUTINE:          # stick, slip, more sub-steps for the tolerance
+            self.log.info(text)
+        elif event.kind == "books":        # the energy books off: an error
+            self.log.error(text)
         elif event.kind != "fault":
             self.warnings.warning(event.kind, text)
 
