@@ -118,16 +118,19 @@ class ArmSimCore(CommandInput):
             self.recorder.start(self.sim)
             self._event(live_change(names, config.values, self.sim.time))
 
-    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+    def tick(self, wall_now: float | None = None,
+             clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
         lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless no tick came for lockstep_wait. Paused:
-        the held state, time standing still."""
+        the transport publishes them): None, unless a node listens on /clock
+        (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
+        it commands) and no tick came for lockstep_wait. Paused: the held state, time
+        standing still."""
         if self.paused:
             return self.joint_state()
         if not self.config.values["lockstep"]:
             return self._tick(wall_now)
-        wait = self.config.values["lockstep_wait"]
+        wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
         return self._tick(now) if wait and (last is None or now - last >= wait) else None

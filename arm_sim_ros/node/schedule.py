@@ -38,3 +38,14 @@ class TickSchedule:
         self.next_tick += period
         if self.next_tick < now - max(period, CATCH_UP):
             self.next_tick = now
+
+
+STATE_BEFORE_CLOCK = 0.001    # wall s from a lockstep tick's JointState to its /clock
+
+
+def clock_delay(values: dict) -> float:
+    """Wall seconds between a tick's JointState and its /clock: in lockstep a use_sim_time
+    controller (controller_manager) wakes on /clock and reads the latest JointState its
+    hardware has taken, in another thread; sent together, it often had not yet taken this
+    one and acted on the state a tick older."""
+    return STATE_BEFORE_CLOCK if values["lockstep"] else 0.0

@@ -159,7 +159,7 @@ def test_states_the_node_cannot_take_are_refused_with_the_packages_codes(target,
 def test_lockstep_publishes_the_clock_while_it_waits_for_the_first_command():
     """controller_manager under use_sim_time waits for /clock before it sends a command; a
     lockstep node that waited for a command first would deadlock with it."""
-    node, peer = start(203, lockstep=True, real_time_factor=0.0)
+    node, peer = start(203, lockstep=True, lockstep_wait=0.0, real_time_factor=0.0)
     _, clock = readers(peer)
     wait_until(lambda: msg.matched(node.clock_writer), "/clock reader not matched")
     spinning = threading.Thread(target=node.spin, kwargs={"duration_s": 0.02})

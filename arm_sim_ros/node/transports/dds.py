@@ -23,7 +23,7 @@ from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..params.parameters import resolve_parameters
 from ..params.ros_args import remap_name
-from ..schedule import TickSchedule
+from ..schedule import TickSchedule, clock_delay
 from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
@@ -145,7 +145,7 @@ class DdsArmSimNode:
         lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
         self.services.poll()   # answer service requests between ticks
-        data = self.core.tick(wall_now)
+        data = self.core.tick(wall_now, self.clock_listened())
         if data is not None:
             self._publish(data)
         return data
@@ -153,7 +153,13 @@ class DdsArmSimNode:
     def _publish(self, data: JointStateData) -> None:
         self.joint_state_writer.write(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
+            if delay := clock_delay(self.core.config.values):   # the state first
+                time.sleep(delay)
             self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
+
+    def clock_listened(self) -> bool:
+        """Whether a node listens on /clock (a use_sim_time peer)."""
+        return self.core.config.values["publish_clock"] and msg.matched(self.clock_writer) > 0
 
     def _publish_clock(self) -> None:
         """The current time on /clock: at start, and while lockstep waits for a command."""
@@ -184,7 +190,7 @@ class DdsArmSimNode:
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
-                    data = self.core.tick(now)         # lockstep_wait: a tick of its own
+                    data = self.core.tick(now, self.clock_listened())   # lockstep_wait
                     if data is None:
                         self._publish_clock()          # the time, while nobody commands
                     else:

@@ -25,7 +25,7 @@ from ..diagnostics import DiagnosticData, JointStateData
 from ..services.parameter_services import could_not_apply
 from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused,
                                  resolve_parameters, scene_defaults)
-from ..schedule import TickSchedule
+from ..schedule import TickSchedule, clock_delay
 from ..services.simulation import SimulationControl
 from . import rclpy_simulation
 
@@ -124,7 +124,8 @@ class ArmSimNode(Node):
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
-        data = self.core.tick()
+        data = self.core.tick(clock_listened=self.core.config.values["publish_clock"] and
+                              self.clock_publisher.get_subscription_count() > 0)
         if data is not None:
             self._publish(data)
         return data
@@ -132,6 +133,8 @@ class ArmSimNode(Node):
     def _publish(self, data: JointStateData) -> None:
         self.joint_state_publisher.publish(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
+            if delay := clock_delay(self.core.config.values):   # the state first
+                time.sleep(delay)
             self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
 
     def _publish_clock(self) -> None:
