@@ -210,7 +210,7 @@ def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure():
 
 def test_a_servo_scene_takes_pythons_path_on_every_interface():
     """An effort joint reads no set-point list; were its scene compiled, a node switching
-    servo.interface live would stall seconds in a first compile (9 s measured)."""
+    servo.interface live would stall 2 to 9 s in a compile (measured)."""
     for interface in ("position", "velocity", "effort"):
         scene = load_scene("servo_hold").replace(**{"servo.interface": [interface] * 2})
         assert Simulator(scene).path == "python", interface
