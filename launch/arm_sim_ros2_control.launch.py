@@ -15,6 +15,7 @@ loaded and inactive, ready to switch to), arm_sim_controllers and robot_state_pu
     ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py controller:=effort
     ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py controller:=velocity
     ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py use_sim_time:=true lockstep:=true
+    ros2 launch arm_sim_ros arm_sim_ros2_control.launch.py transport:=dds
 
 The arm starts held: the default scene servo_hold holds its initial pose with joint servos
 (position, velocity) or gravity feed-forward (effort: policy command_gravity_compensation),
@@ -72,6 +73,7 @@ def controlled(context):
              if has_servo(LaunchConfiguration('scene').perform(context)) else {})
     arm_sim = Node(
         package='arm_sim_ros', executable='arm_sim_node', name='arm_sim', output='screen',
+        arguments=['--transport', LaunchConfiguration('transport').perform(context)],
         parameters=[{'scene': ParameterValue(LaunchConfiguration('scene'), value_type=str),
                      'policy': ParameterValue(LaunchConfiguration('policy'), value_type=str),
                      'lockstep': ParameterValue(LaunchConfiguration('lockstep'), value_type=bool),
@@ -113,6 +115,10 @@ def generate_launch_description():
                               description='the node advances one tick per command'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='start rviz2 with rviz/arm_sim.rviz'),
+        DeclareLaunchArgument('transport', default_value='auto',
+                              description="the node's: rclpy (auto, where ROS is sourced) or "
+                                          'dds (its own Cyclone DDS; parameters need '
+                                          'RMW_IMPLEMENTATION=rmw_cyclonedds_cpp)'),
     ]
     # controller_manager reads the URDF from robot_state_publisher's /robot_description topic
     control = Node(

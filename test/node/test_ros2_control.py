@@ -23,6 +23,7 @@ from arm_sim_ros.interface import JOINT_NAMES, NODE_NAME
 from arm_sim_ros.node.wire import messages as msg
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import SPECS, resolve_parameters
+from arm_sim_ros.node.transports import TRANSPORTS
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from node.ros2_control_loop import Core, Manager, TrajectoryController
 from node.test_node_dds import CONFIG, TIMEOUT, wait_until
@@ -177,10 +178,12 @@ def test_the_launch_picks_a_controller_the_config_carries_and_the_interface_it_c
                                                                       [None])[0])
     arguments = {call.args[0].value: call for call in ast.walk(LAUNCH) if isinstance(call, ast.Call)
                  and getattr(call.func, "id", "") == "DeclareLaunchArgument"}
-    assert set(arguments) == {"scene", "policy", "controller", "use_sim_time", "lockstep", "rviz"}
+    assert set(arguments) == {"scene", "policy", "controller", "use_sim_time", "lockstep", "rviz",
+                              "transport"}
     defaults = {name: next(k.value.value for k in call.keywords if k.arg == "default_value")
                 for name, call in arguments.items()}
     assert defaults["controller"] in namespace["CONTROLLERS"]
+    assert defaults["transport"] in ("auto",) + TRANSPORTS       # arm_sim_node --transport
     # the arm starts held: the default scene's servos hold its initial pose
     config = resolve_parameters({"scene": defaults["scene"], "policy": defaults["policy"]})
     assert config.scene.servo is not None
