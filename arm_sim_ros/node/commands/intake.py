@@ -199,11 +199,11 @@ class CommandIntake:
 
     def _hold(self, efforts: dict, now: float) -> tuple:
         """{joint: torque} held from now (a joint not in it keeps its own); the command."""
-        if self.received_at is None:
-            self.log.info(f"torque command {efforts} N m by joint, held until the next one")
         command = list(self.value)
         for joint, tau in efforts.items():
             command[joint] = tau
+        if self.received_at is None:
+            self.log.info(f"torque command {command} N m, held until the next one")
         self.value, self.received_at = tuple(command), now
         return self.value
 
