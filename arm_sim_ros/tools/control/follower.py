@@ -40,8 +40,8 @@ def follower_class():
     class ControllerFollower(Node):
         """controller_manager's switches into the node's servo.interface."""
 
-        def __init__(self, target: str, manager: str):
-            super().__init__("arm_sim_controllers")
+        def __init__(self, target: str, manager: str, **node_kwargs):
+            super().__init__("arm_sim_controllers", **node_kwargs)
             self.target = target
             self.controllers, self.states = {}, {}     # name -> command interfaces, state
             self.joint_names = self.current = None     # the node's, once it answers
