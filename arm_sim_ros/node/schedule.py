@@ -40,12 +40,8 @@ class TickSchedule:
             self.next_tick = now
 
 
-STATE_BEFORE_CLOCK = 0.001    # wall s from a lockstep tick's JointState to its /clock
-
-
-def clock_delay(values: dict) -> float:
-    """Wall seconds between a tick's JointState and its /clock: in lockstep a use_sim_time
-    controller (controller_manager) wakes on /clock and reads the latest JointState its
-    hardware has taken, in another thread; sent together, it often had not yet taken this
-    one and acted on the state a tick older."""
-    return STATE_BEFORE_CLOCK if values["lockstep"] else 0.0
+# Wall seconds from the JointState of a tick a command made (lockstep) to its /clock: a
+# use_sim_time controller (controller_manager) wakes on /clock and reads the latest JointState
+# its hardware has taken, in another thread; written together, it often had not yet taken
+# this one and acted on the state a tick older.
+STATE_BEFORE_CLOCK = 0.001

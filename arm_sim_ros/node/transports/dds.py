@@ -23,7 +23,7 @@ from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..params.parameters import resolve_parameters
 from ..params.ros_args import remap_name
-from ..schedule import TickSchedule, clock_delay
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
@@ -137,7 +137,7 @@ class DdsArmSimNode:
                                                  sample.effort)
                 count += 1
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
         return count
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
@@ -150,11 +150,11 @@ class DdsArmSimNode:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
         self.joint_state_writer.write(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
-            if delay := clock_delay(self.core.config.values):   # the state first
-                time.sleep(delay)
+            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
+                time.sleep(clock_after)
             self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
 
     def clock_listened(self) -> bool:

@@ -25,7 +25,7 @@ from ..diagnostics import DiagnosticData, JointStateData
 from ..services.parameter_services import could_not_apply
 from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused,
                                  resolve_parameters, scene_defaults)
-from ..schedule import TickSchedule, clock_delay
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
 from . import rclpy_simulation
 
@@ -113,7 +113,7 @@ class ArmSimNode(Node):
 
     def _publish_lockstep(self) -> None:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
@@ -130,11 +130,11 @@ class ArmSimNode(Node):
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
         self.joint_state_publisher.publish(to_joint_state(data))
         if self.core.config.values["publish_clock"]:
-            if delay := clock_delay(self.core.config.values):   # the state first
-                time.sleep(delay)
+            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
+                time.sleep(clock_after)
             self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
 
     def _publish_clock(self) -> None:
