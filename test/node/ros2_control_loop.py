@@ -10,8 +10,11 @@ What the sources say (ros2_control 4.46, ros2_controllers jazzy, topic_based_har
   read() takes the latest JointState by name;
 - a switch is made at the start of a cycle: the old controller's on_deactivate, the new one's
   on_activate, then the new one's update and the hardware's write in the same cycle;
-- JointTrajectoryController: on_activate holds the position read; on_deactivate leaves the
-  position command as it is and writes velocity 0 and effort 0;
+- JointTrajectoryController: on_activate holds the position read, or, with
+  set_last_command_interface_value_as_state_on_activation (default true), the position its
+  command interfaces hold where every joint's is set (what the controller active before left
+  there); on_deactivate leaves the position command as it is and writes velocity 0 and
+  effort 0;
 - ForwardCommandController: its buffer is NaN at activation (it writes nothing until its
   first command); on_deactivate leaves its last values in the interfaces.
 """
@@ -39,6 +42,10 @@ class TrajectoryController:
 
     def activate(self, hardware) -> None:
         q = [hardware.state[(j, "position")] for j in JOINT_NAMES]
+        left = [hardware.commands[(j, "position")] for j in JOINT_NAMES]
+        if (self.config.get("set_last_command_interface_value_as_state_on_activation", True)
+                and self.interface == "position" and all(v == v for v in left)):
+            q = left
         self.start = self.target = q
         self.duration, self.t, self.integral = 1.0, 0.0, [0.0, 0.0]
 
