@@ -15,7 +15,7 @@ from arm_sim_ros.node.params.parameters import (EFFECT_PARAMETERS, LIVE, START_O
                                                 ParameterRefused, resolve_parameters)
 from arm_sim_ros.node.params.ros_args import load_params_file
 from arm_sim_ros.physics import model
-from arm_sim_ros.physics.effects import MAPPING_EFFECTS
+from arm_sim_ros.physics.scene import MAPPINGS
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -182,6 +182,10 @@ SERVO = {"servo.interface": ["position", "velocity"], "servo.kp": [200.0, 20.0],
          "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 8.0], "servo.integral_limit": [20.0, 5.0],
          "servo.velocity_kp": [25.0, 15.0], "servo.velocity_ki": [90.0, 12.0],
          "servo.tracking": [2.0, 1.0], "servo.rate": 1000.0}
+SENSED = {"sensors.seed": 7.0, "sensors.rate": 500.0, "sensors.position_resolution": [1e-3, 1e-3],
+          "sensors.position_noise": [1e-4, 1e-4], "sensors.position_offset": [0.01, 0.0],
+          "sensors.velocity": "differences", "sensors.velocity_noise": None,
+          "sensors.delay": 0.002}     # test/node/test_sensors_node.py runs them
 POLICY = {"hard_limits": "gravity_compensation", "compliant_limits": "gravity_compensation",
           "servo": "command_gravity_compensation"}
 
@@ -201,12 +205,13 @@ def scene_text(values: dict) -> str:
 
 
 def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_names_it():
-    keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPING_EFFECTS.items()
+    keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPINGS.items()
                                 for p in kind.parameters}
     assert ({spec.name for spec in EFFECT_PARAMETERS} == keys
-            == set(AT_START) | set(COMPLIANT) | set(SERVO))
-    # double, double[], string[] (the servo's interface names)
-    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list"}
+            == set(AT_START) | set(COMPLIANT) | set(SERVO) | set(SENSED))
+    # double, double[], string[] (the servo's interface names), string (sensors.velocity)
+    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list",
+                                                         "str"}
 
 
 @pytest.mark.parametrize("values", [AT_START, COMPLIANT, SERVO],
@@ -263,9 +268,10 @@ def test_a_ros2_param_dump_with_keys_not_set_starts_the_node_again(tmp_path):
 
 def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_is_start_only():
     names = {spec.name for spec in EFFECT_PARAMETERS}
-    live = {"effort_limits", "friction", "controller_model", "payload", "servo"}
+    live = {"effort_limits", "friction", "controller_model", "payload", "servo", "sensors"}
     assert {n.partition(".")[0] for n in names & set(LIVE)} == live
-    assert set(LIVE) == {"damping"} | {n for n in names if n.partition(".")[0] in live}
+    assert set(LIVE) == {"damping", "command_delay"} | {n for n in names
+                                                        if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
                                "joint_commands_topic"} | (names - set(LIVE))
 

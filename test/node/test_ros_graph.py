@@ -14,7 +14,8 @@ from rosbags.typesys import Stores, get_typestore
 from arm_sim_ros.interface import OK
 from arm_sim_ros.node.wire import messages as msg
 from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.node.schedule import STATE_BEFORE_CLOCK, TickSchedule
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from node.test_node_dds import CONFIG, TIMEOUT, FakeClock, Peer, start, wait_until

@@ -7,7 +7,8 @@ import logging
 import pytest
 
 from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 
 NAMES = ["shoulder_joint", "elbow_joint"]
 

@@ -15,6 +15,9 @@ from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
 pytest.importorskip("numba")
+if os.environ.get("ARM_SIM_COMPILED") == "0":      # .ci/run's pure-Python pass: its second
+    pytest.skip("the compiled path is off (ARM_SIM_COMPILED=0); .ci/run's compiled pass "
+                "runs these", allow_module_level=True)
 
 SCENES = {
     "release": load_scene("release"),
@@ -222,3 +225,27 @@ def test_every_preset_without_a_servo_takes_the_compiled_path():
         scene = load_scene(name)
         expected = "python" if scene.servo is not None else "compiled (numba)"
         assert Simulator(scene).path == expected, name
+
+
+@pytest.mark.parametrize("name", ["release", "motor_windings_hold", "stick_slip", "geared_arm",
+                                  "limit_impact"])
+def test_an_off_run_is_python_s_bit_for_bit_and_smooth_steps_stay_compiled(name, monkeypatch):
+    """estimate off: the compiled loops with no check ever due and no shadow (issue 35);
+    a smooth scene's run takes no step in Python."""
+    scene = load_scene(name).replace(estimate="off", tolerance=0.0)
+    python, fast = python_and_compiled(scene, monkeypatch)
+    taken, step = [], fast.step
+    monkeypatch.setattr(fast, "step", lambda: taken.append(fast.steps) or step())
+    for sim in (python, fast):
+        sim.set_command(2.0, -1.0)
+    for duration in (0.37, 1.0):
+        assert python.run(duration) == fast.run(duration)
+        assert (python.state, python.steps, python._sound, python.energy_in_play) == (
+            fast.state, fast.steps, fast._sound, fast.energy_in_play)
+        assert python.switch_events == fast.switch_events
+        assert python.substeps_taken == fast.substeps_taken
+    assert math.isnan(fast.accumulated_error) and math.isnan(fast.error_estimate)
+    if fast.switching is None:
+        assert taken == []
+    else:     # only the steps in which something could switch
+        assert len(taken) < fast.steps / 4

@@ -52,6 +52,9 @@ def environment(home: Path) -> dict:
     return env | {
         "PATH": f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
         "HOME": str(home), "ROS_DOMAIN_ID": DOMAIN_ID,
+        # the machine's compiled kernels, as a user's runs find them (a new HOME would
+        # compile every scene again, in every file)
+        "ARM_SIM_CACHE": env.get("ARM_SIM_CACHE") or str(Path.home() / ".cache/arm_sim_ros"),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "http_proxy": nowhere, "https_proxy": nowhere, "HTTP_PROXY": nowhere,
         "HTTPS_PROXY": nowhere, "PIP_NO_INDEX": "1", "MPLBACKEND": "Agg",
