@@ -69,10 +69,8 @@ class ArmSimCore(CommandInput):
     def _on_sim_event(self, event) -> None:
         """What the simulator does later reaches the log as it happens (a fault: _advance)."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ROUTINE:          # stick, slip, more sub-steps for the tolerance
-            self.log.info(text)
-        elif event.kind == "books":        # the energy books off: an error
-            self.log.error(text)
+        if event.kind in ROUTINE or event.kind == "books":  # stick, slip, sub-steps; books off
+            (self.log.info if event.kind in ROUTINE else self.log.error)(text)
         elif event.kind != "fault":
             self.warnings.warning(event.kind, text)
 

@@ -57,6 +57,11 @@ def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
     return msg.DiagnosticArray(header=msg.Header(stamp=_stamp(data.stamp_ns)), status=[status])
 
 
+def clock_listened(core: ArmSimCore, clock_writer) -> bool:
+    """Whether a node listens on /clock (a use_sim_time peer)."""
+    return core.config.values["publish_clock"] and msg.matched(clock_writer) > 0
+
+
 class DdsArmSimNode:
     def __init__(self, parameters: dict, *, domain_id: int | None = None, config: str | None = None,
                  log=None, wall_clock=time.monotonic, start_stamp_ns: int | None = None,
@@ -161,7 +166,7 @@ class DdsArmSimNode:
         lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
         self.services.poll()   # answer service requests between ticks
-        data = self.core.tick(wall_now, self.clock_listened())
+        data = self.core.tick(wall_now, clock_listened(self.core, self.clock_writer))
         if data is not None:
             self._publish(data)
         return data
@@ -169,8 +174,7 @@ class DdsArmSimNode:
     def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
         """joint_states and /clock, serialized straight from the data (cdr.py: the bytes a
         messages.JointState and messages.Clock serialize to, with neither built); with sensors,
-        the readings there and the state on ~/true_joint_states at the same stamp. /clock
-        `clock_after` s after the state (a lockstep tick's STATE_BEFORE_CLOCK)."""
+        the readings there and the state on ~/true_joint_states at the same stamp."""
         sec, nanosec = split_stamp(data.stamp_ns)
         write_cdr(self.joint_state_writer, joint_state_bytes(
             sec, nanosec, data.frame_id, data.name, data.position, data.velocity, data.effort))
@@ -183,13 +187,9 @@ class DdsArmSimNode:
                 sec, nanosec, truth.frame_id, truth.name, truth.position, truth.velocity,
                 truth.effort))
         if self.core.config.values["publish_clock"]:
-            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
+            if clock_after:               # a lockstep tick: the state first, then /clock
                 time.sleep(clock_after)
             write_cdr(self.clock_writer, clock_cdr(sec, nanosec))
-
-    def clock_listened(self) -> bool:
-        """Whether a node listens on /clock (a use_sim_time peer)."""
-        return self.core.config.values["publish_clock"] and msg.matched(self.clock_writer) > 0
 
     def _publish_clock(self) -> None:
         """The current time on /clock: at start, and while lockstep waits for a command."""
@@ -220,7 +220,8 @@ class DdsArmSimNode:
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
-                    data = self.core.tick(now, self.clock_listened())   # lockstep_wait
+                    listened = clock_listened(self.core, self.clock_writer)
+                    data = self.core.tick(now, listened)   # lockstep_wait: a tick of its own
                     if data is None:
                         self._publish_clock()          # the time, while nobody commands
                     else:

@@ -5,13 +5,9 @@ Scene: `servo: {interface: [position, velocity], kp: [..], ki: [..], kd: [..]}`,
 `tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
 
 - position: eᵢ = qᵢ* − qᵢ,  rᵢ = kpᵢ eᵢ + kdᵢ (q̇ᵢ* − q̇ᵢ) + clamp(wᵢ, ±Wᵢ)
-- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ), kpᵢ and kiᵢ the velocity gains
-  (velocity_kp, velocity_ki; kp and ki where not given); kd is not used (it would act on the
-  acceleration the torque causes)
+- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ) with the velocity gains (velocity_kp,
+  velocity_ki; else kp, ki) and no kd (it would act on the acceleration the torque causes)
 - effort:   rᵢ = the commanded torque (the command policies) or the scene's `setpoint`
-
-Each joint takes the gains of its interface, so an interface switched live and back finds
-its gains as they were.
 
 plus the believed gravity torque under command_gravity_compensation (feed-forward). The
 request is clamped to the effort limits, τᵢ = clamp(rᵢ, ±eᵢ), here (the servo replaces the
@@ -86,12 +82,10 @@ class Servo(Actuator):
             raise ParameterError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
                                  f"{policy!r}")
         self.interface = tuple(interface)
-        # each joint takes the gains of its interface: a velocity joint its own, and no kd
-        velocity_kp = kp if velocity_kp is None else velocity_kp
-        velocity_ki = ki if velocity_ki is None else velocity_ki
+        # each joint the gains of its interface (a switch back finds them): velocity, no kd
         on_velocity = [kind == "velocity" for kind in interface]
-        self.kp = tuple(v if on else p for on, p, v in zip(on_velocity, kp, velocity_kp))
-        self.ki = tuple(v if on else i for on, i, v in zip(on_velocity, ki, velocity_ki))
+        self.kp = tuple(v if on else p for on, p, v in zip(on_velocity, kp, velocity_kp or kp))
+        self.ki = tuple(v if on else i for on, i, v in zip(on_velocity, ki, velocity_ki or ki))
         self.kd = tuple(0.0 if on else d for on, d in zip(on_velocity, kd))
         self.integral_limit, self.effort_limits = integral_limit, effort_limits
         self.tracking = tracking or tuple(i / p if i > 0 and p > 0 else 1.0
