@@ -16,7 +16,7 @@ from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, load_scene
 from ..physics.urdf.read import changed_values, read_urdf
-from ..physics.simulator import Simulator
+from ..physics.simulator import ROUTINE, Simulator
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -69,8 +69,8 @@ class ArmSimCore(CommandInput):
     def _on_sim_event(self, event) -> None:
         """What the simulator does later reaches the log as it happens (a fault: _advance)."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
-            (self.log.info if event.kind == "switch" else self.log.error)(text)
+        if event.kind in ROUTINE or event.kind == "books":  # stick, slip, sub-steps; books off
+            (self.log.info if event.kind in ROUTINE else self.log.error)(text)
         elif event.kind != "fault":
             self.warnings.warning(event.kind, text)
 
@@ -116,16 +116,19 @@ class ArmSimCore(CommandInput):
             self.recorder.start(self.sim)
             self._event(live_change(names, config.values, self.sim.time))
 
-    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+    def tick(self, wall_now: float | None = None,
+             clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
         lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless no tick came for lockstep_wait. Paused:
-        the held state, time standing still."""
+        the transport publishes them): None, unless a node listens on /clock
+        (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
+        it commands) and no tick came for lockstep_wait. Paused: the held state, time
+        standing still."""
         if self.paused:
             return self.joint_state()
         if not self.config.values["lockstep"]:
             return self._tick(wall_now)
-        wait = self.config.values["lockstep_wait"]
+        wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
         return self._tick(now) if wait and (last is None or now - last >= wait) else None

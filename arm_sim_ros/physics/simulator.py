@@ -29,12 +29,16 @@ from .scene import Scene
 from .compiled.switch_run import Switched
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
+# Event kinds that say what the simulator does as designed, not that anything went wrong:
+# a stick, slip or impact (switch), and the tolerance raising the sub-steps it takes
+# (substeps). Said at info; the others (a tolerance not met, a fault ...) are warnings.
+ROUTINE = ("switch", "substeps")
 
 
 @dataclass(frozen=True)
 class Event:
     """Something the simulator did that a person should hear about (kind: substepping,
-    fault, saturation)."""
+    substeps, switch, fault, saturation, books, accuracy, servo)."""
 
     t: float
     kind: str

@@ -16,6 +16,7 @@ from dataclasses import MISSING, fields
 
 from .. import interface
 from ..node.main import ROS_TYPES, build_parser as node_parser
+from .control.follower import build_parser as controllers_parser
 from ..node.params.parameters import PARAMETERS, SPECS, scene_defaults, when_changed
 from ..physics.effects import EffortLimits
 from ..physics.effects.base import CHECKS, REQUIRED
@@ -147,6 +148,11 @@ def command_line_page() -> str:
     commands = next(a for a in parser._actions if a.choices and hasattr(a, "_name_parser_map"))
     for name, sub in commands.choices.items():
         out += [f"## `arm-sim {name}`\n\n", _help(sub)]
+    controllers = controllers_parser()
+    out += ["## `arm_sim_controllers`\n\n", _help(controllers)]
+    jobs = next(a for a in controllers._actions if hasattr(a, "_name_parser_map"))
+    for name, sub in jobs.choices.items():
+        out += [f"## `arm_sim_controllers {name}`\n\n", _help(sub)]
     return "\n".join(part.rstrip("\n") + "\n" for part in out)
 
 

@@ -123,14 +123,24 @@ def test_a_nan_effort_does_not_hide_what_else_is_wrong_with_the_command(names, e
     assert core.refused_commands == 1 and core.command == (0.0, 0.0)
 
 
+def test_a_position_or_velocity_for_a_torque_driven_joint_is_ignored():
+    """What ros2_control's topic-based hardware sends for every interface of every joint:
+    an effort joint takes the effort and ignores the rest, refusing none of it."""
+    core = make_core(scene="release", policy="command")
+    assert core.on_joint_state_command(["shoulder_joint"], [0.3], [1e9], []) is None
+    assert core.refused_commands == 0 and core.command == (0.0, 0.0)
+    assert core.on_joint_state_command(["shoulder_joint"], [0.3], [0.0], [2.0]) is None
+    assert core.command == (2.0, 0.0)
+
+
 @pytest.mark.parametrize("names, position, velocity, effort, reason", [
-    (["shoulder_joint"], [0.3], [], [], "the node is torque-driven"),
+    (["shoulder_joint"], [], [], [], "it carries no position, velocity or effort"),
     (["wrist_joint"], [], [], [1.0], "unknown joint 'wrist_joint'"),
     (["shoulder_joint", "elbow_joint"], [], [], [1.0], "2 names but 1 efforts"),
     (["shoulder_joint", "shoulder_joint"], [], [], [1.0, 2.0], "named twice"),
     (["shoulder_joint"], [], [], [float("inf")], "not finite"),   # NaN: unset (above)
 ])
-def test_a_joint_state_command_that_is_not_a_torque_command_is_refused_and_counted(
+def test_a_malformed_joint_state_command_is_refused_and_counted(
         names, position, velocity, effort, reason):
     core = make_core(scene="release", policy="command")
     assert reason in core.on_joint_state_command(names, position, velocity, effort)
@@ -169,7 +179,8 @@ AT_START = {
 COMPLIANT = {"joint_limits.lower": [-0.5, -2.5], "joint_limits.upper": [0.5, 2.5],
              "joint_limits.stiffness": 500.0, "joint_limits.damping": 2.0}
 SERVO = {"servo.interface": ["position", "velocity"], "servo.kp": [200.0, 20.0],
-         "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 0.0], "servo.integral_limit": [20.0, 5.0],
+         "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 8.0], "servo.integral_limit": [20.0, 5.0],
+         "servo.velocity_kp": [25.0, 15.0], "servo.velocity_ki": [90.0, 12.0],
          "servo.tracking": [2.0, 1.0], "servo.rate": 1000.0}
 SENSED = {"sensors.seed": 7.0, "sensors.rate": 500.0, "sensors.position_resolution": [1e-3, 1e-3],
           "sensors.position_noise": [1e-4, 1e-4], "sensors.position_offset": [0.01, 0.0],

@@ -166,9 +166,10 @@ PARAMETERS = (
                   "start + simulated time)", when=START),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
-    ParameterSpec("lockstep_wait", "float", 0.0, "in lockstep, a tick of its own once no "
-                  "command came for this long (wall s; 0 = never): controller_manager under "
-                  "use_sim_time waits for the clock to move before it commands"),
+    ParameterSpec("lockstep_wait", "float", 0.1, "in lockstep, while a node listens on "
+                  "/clock, a tick of its own once no command came for this long (wall s; 0 = "
+                  "never): controller_manager under use_sim_time waits for the clock to move "
+                  "before it commands"),
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)

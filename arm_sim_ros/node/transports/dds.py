@@ -28,7 +28,7 @@ from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..params.parameters import resolve_parameters
 from ..params.ros_args import remap_name
-from ..schedule import TickSchedule
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
@@ -55,6 +55,11 @@ def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
                                   hardware_id=data.hardware_id,
                                   values=[msg.KeyValue(k, v) for k, v in data.values])
     return msg.DiagnosticArray(header=msg.Header(stamp=_stamp(data.stamp_ns)), status=[status])
+
+
+def clock_listened(core: ArmSimCore, clock_writer) -> bool:
+    """Whether a node listens on /clock (a use_sim_time peer)."""
+    return core.config.values["publish_clock"] and msg.matched(clock_writer) > 0
 
 
 class DdsArmSimNode:
@@ -153,7 +158,7 @@ class DdsArmSimNode:
 
     def _publish_lockstep(self, count: int = 0) -> int:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
         return count
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
@@ -161,12 +166,12 @@ class DdsArmSimNode:
         lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
         self.services.poll()   # answer service requests between ticks
-        data = self.core.tick(wall_now)
+        data = self.core.tick(wall_now, clock_listened(self.core, self.clock_writer))
         if data is not None:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
         """joint_states and /clock, serialized straight from the data (cdr.py: the bytes a
         messages.JointState and messages.Clock serialize to, with neither built); with sensors,
         the readings there and the state on ~/true_joint_states at the same stamp."""
@@ -182,6 +187,8 @@ class DdsArmSimNode:
                 sec, nanosec, truth.frame_id, truth.name, truth.position, truth.velocity,
                 truth.effort))
         if self.core.config.values["publish_clock"]:
+            if clock_after:               # a lockstep tick: the state first, then /clock
+                time.sleep(clock_after)
             write_cdr(self.clock_writer, clock_cdr(sec, nanosec))
 
     def _publish_clock(self) -> None:
@@ -213,7 +220,8 @@ class DdsArmSimNode:
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
-                    data = self.core.tick(now)         # lockstep_wait: a tick of its own
+                    listened = clock_listened(self.core, self.clock_writer)
+                    data = self.core.tick(now, listened)   # lockstep_wait: a tick of its own
                     if data is None:
                         self._publish_clock()          # the time, while nobody commands
                     else:

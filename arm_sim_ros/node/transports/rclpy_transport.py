@@ -28,7 +28,7 @@ from ..services.parameter_services import could_not_apply
 from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, resolve_parameters,
                                  scene_defaults)
 from ..params.values import ParameterRefused
-from ..schedule import TickSchedule
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
 from ..wire.cdr import clock_cdr, joint_state_bytes
 from . import rclpy_simulation
@@ -142,7 +142,7 @@ class ArmSimNode(Node):
 
     def _publish_lockstep(self) -> None:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
@@ -153,14 +153,16 @@ class ArmSimNode(Node):
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
-        data = self.core.tick()
+        data = self.core.tick(clock_listened=self.core.config.values["publish_clock"] and
+                              self.clock_publisher.get_subscription_count() > 0)
         if data is not None:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
         """joint_states and /clock; with sensors, the readings there and the state on
-        ~/true_joint_states at the same stamp."""
+        ~/true_joint_states at the same stamp. /clock `clock_after` s after the state (a
+        lockstep tick's STATE_BEFORE_CLOCK)."""
         self._publish_state(self.joint_state_publisher, data, self.joint_state_message)
         if data.truth is not None:
             if self.truth_publisher is None:
@@ -169,6 +171,8 @@ class ArmSimNode(Node):
                 self.truth_message = JointState()
             self._publish_state(self.truth_publisher, data.truth, self.truth_message)
         if self.core.config.values["publish_clock"]:
+            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
+                time.sleep(clock_after)
             if self.serialized:
                 self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
             else:

@@ -1,11 +1,12 @@
 """Joint servos: a PID per joint turns a position or velocity set-point into the joint torque.
 
 Scene: `servo: {interface: [position, velocity], kp: [..], ki: [..], kd: [..]}`, optional
-`integral_limit` (N m) and `tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
+`velocity_kp`, `velocity_ki` (a velocity joint's own gains), `integral_limit` (N m) and
+`tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
 
 - position: eᵢ = qᵢ* − qᵢ,  rᵢ = kpᵢ eᵢ + kdᵢ (q̇ᵢ* − q̇ᵢ) + clamp(wᵢ, ±Wᵢ)
-- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ)          (kd must be 0: it would
-  act on the acceleration the torque causes)
+- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ) with the velocity gains (velocity_kp,
+  velocity_ki; else kp, ki) and no kd (it would act on the acceleration the torque causes)
 - effort:   rᵢ = the commanded torque (the command policies) or the scene's `setpoint`
 
 plus the believed gravity torque under command_gravity_compensation (feed-forward). The
@@ -59,6 +60,10 @@ class Servo(Actuator):
                   description="integral gain"),
         Parameter("kd", "pair", "N m s/rad", "non-negative", default=(0.0, 0.0),
                   description="derivative gain on the velocity error (position joints)"),
+        Parameter("velocity_kp", "pair", "N m s/rad", "non-negative", default=None,
+                  description="proportional gain of a velocity joint (none = kp)"),
+        Parameter("velocity_ki", "pair", "N m/rad", "non-negative", default=None,
+                  description="integral gain of a velocity joint (none = ki)"),
         Parameter("integral_limit", "pair", "N m", "positive", default=None,
                   description="largest integral torque (none = only the anti-windup)"),
         Parameter("tracking", "pair", "1/s", "positive", default=None,
@@ -69,21 +74,22 @@ class Servo(Actuator):
     )
 
     def __init__(self, interface=("position", "position"), kp=(0.0, 0.0), ki=(0.0, 0.0),
-                 kd=(0.0, 0.0), integral_limit=None, tracking=None, rate=None, *,
-                 policy="setpoint", setpoint=(0.0, 0.0), initial_positions=(0.0, 0.0),
-                 effort_limits=None, command=None, compensation=None, work_kind="input",
-                 believed="g", step_size=None):
-        for i, (kind, d) in enumerate(zip(interface, kd)):
-            if kind == "velocity" and d != 0.0:
-                raise ParameterError(f"servo.kd[{i}] = {d:g} on a velocity joint would act on "
-                                     "the acceleration; a velocity servo takes kp and ki")
+                 kd=(0.0, 0.0), velocity_kp=None, velocity_ki=None, integral_limit=None,
+                 tracking=None, rate=None, *, policy="setpoint", setpoint=(0.0, 0.0),
+                 initial_positions=(0.0, 0.0), effort_limits=None, command=None,
+                 compensation=None, work_kind="input", believed="g", step_size=None):
         if policy not in SERVO_POLICIES:
             raise ParameterError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
                                  f"{policy!r}")
-        self.interface, self.kp, self.ki, self.kd = tuple(interface), kp, ki, kd
+        self.interface = tuple(interface)
+        # each joint the gains of its interface (a switch back finds them): velocity, no kd
+        on_velocity = [kind == "velocity" for kind in interface]
+        self.kp = tuple(v if on else p for on, p, v in zip(on_velocity, kp, velocity_kp or kp))
+        self.ki = tuple(v if on else i for on, i, v in zip(on_velocity, ki, velocity_ki or ki))
+        self.kd = tuple(0.0 if on else d for on, d in zip(on_velocity, kd))
         self.integral_limit, self.effort_limits = integral_limit, effort_limits
         self.tracking = tracking or tuple(i / p if i > 0 and p > 0 else 1.0
-                                          for i, p in zip(ki, kp))
+                                          for i, p in zip(self.ki, self.kp))
         self.policy, self.compensation, self.work_kind = policy, compensation, work_kind
         self.compensates = policy == "command_gravity_compensation"
         self.believed, self.fixed, self.acting = believed, None, None
