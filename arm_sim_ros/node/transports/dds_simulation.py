@@ -172,10 +172,19 @@ ROS_TYPE_NAMES = {kind: f"simulation_interfaces/srv/{name}_{suffix}"
 
 
 class DdsSimulation:
-    """Request -> reply fields for each service, over a SimulationControl (attach it)."""
+    """Request -> reply fields for each service, over a SimulationControl (attach it, and
+    `reply_later(service, reply, request)`); `advance()` between polls: one tick of a
+    step_simulation call, answered after its last."""
 
     def __init__(self):
-        self.control = None
+        self.control = self.reply_later = None
+
+    def advance(self) -> bool:
+        return self.control is not None and self.control.advance()
+
+    @property
+    def busy(self) -> bool:
+        return self.control is not None and bool(self.control.calls)
 
     def services(self) -> list:
         """(service, request type, response type, handler) for DdsServices."""
@@ -195,8 +204,12 @@ class DdsSimulation:
     def _set(self, request) -> dict:
         return {"result": Result(*self.control.set_state(request.state.state))}
 
-    def _step(self, request) -> dict:
-        return {"result": Result(*self.control.step(request.steps))}
+    def _step(self, request) -> dict | None:
+        def done(code, message):
+            self.reply_later("step_simulation", StepSimulationResponse(
+                guid=request.guid, seq=request.seq, result=Result(code, message)), request)
+        now = self.control.call_steps(request.steps, done)
+        return None if now is None else {"result": Result(*now)}
 
     def _reset(self, request) -> dict:
         return {"result": Result(*self.control.reset(request.scope))}
