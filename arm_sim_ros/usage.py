@@ -40,11 +40,11 @@ class ArgumentParser(argparse.ArgumentParser):
 
 def exit_as_main(code: int):
     """sys.exit(code) for `python -m ...`: under -m, CPython (3.11 to 3.13, Modules/main.c)
-    ends the process by SIGINT (-2) instead of `code` when a KeyboardInterrupt once passed through an
-    exec of a string, however it was caught and handled after. numba and dataclasses exec
-    strings, so a SIGTERM met inside a first tick's compile turned a clean stop (exit 0) into
-    -2, one stop in six. A fresh exec clears that note (pythonrun.c run_eval_code_obj). The
-    console scripts run as files and never met it."""
+    ends the process by SIGINT (-2) instead of `code` when a KeyboardInterrupt once passed
+    through an exec of a string, however it was caught and handled after. numba and
+    dataclasses exec strings, so a SIGTERM met inside a first tick's compile turned a clean
+    stop (exit 0) into -2, one stop in six. A fresh exec clears that note (pythonrun.c
+    run_eval_code_obj). The console scripts run as files and never met it."""
     exec("pass")
     sys.exit(code)
 
