@@ -16,7 +16,7 @@ from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, load_scene
 from ..physics.urdf.read import changed_values, read_urdf
-from ..physics.simulator import Simulator, abs_residual
+from ..physics.simulator import ROUTINE, Simulator, abs_residual
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -69,8 +69,8 @@ class ArmSimCore(CommandInput):
     def _on_sim_event(self, event) -> None:
         """What the simulator does later reaches the log as it happens (a fault: _advance)."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
-            (self.log.info if event.kind == "switch" else self.log.error)(text)
+        if event.kind in ROUTINE or event.kind == "books":  # stick, slip, sub-steps; books off
+            (self.log.info if event.kind in ROUTINE else self.log.error)(text)
         elif event.kind != "fault":
             self.warnings.warning(event.kind, text)
 
@@ -110,30 +110,33 @@ class ArmSimCore(CommandInput):
         self.recorder.hand_over()
         if names:          # the transaction (rebuild.py); a servo switches bumplessly
             change_live(self.sim, config, names)
-            self.commands.value = tuple(self.sim.dynamics.command)
+            self.commands.value = tuple(self.sim.dynamics.given)
         self.config = config
         if names:
             self.recorder.start(self.sim)
             self._event(live_change(names, config.values, self.sim.time))
 
-    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+    def tick(self, wall_now: float | None = None,
+             clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
         lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless no tick came for lockstep_wait. Paused:
-        the held state, time standing still."""
+        the transport publishes them): None, unless a node listens on /clock
+        (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
+        it commands) and no tick came for lockstep_wait. Paused: the held state, time
+        standing still."""
         if self.paused:
             return self.joint_state()
         if not self.config.values["lockstep"]:
             return self._tick(wall_now)
-        wait = self.config.values["lockstep_wait"]
+        wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
         return self._tick(now) if wait and (last is None or now - last >= wait) else None
 
-    def step_ticks(self, count: int) -> list:
-        """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""
+    def step_tick(self) -> JointStateData:
+        """A tick now, whatever the schedule (StepSimulation); its JointState."""
         self._last_tick_wall = None       # asked for: not late
-        return [self._tick() for _ in range(count)]
+        return self._tick()
 
     def take_lockstep_states(self) -> list:
         states, self.lockstep_states = self.lockstep_states, []
@@ -144,7 +147,7 @@ class ArmSimCore(CommandInput):
         if not self.held:
             if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
                 self._set_command(0.0, 0.0)
-                servo.hold(self.sim.dynamics, self.sim.state)
+                servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
         return self.joint_state()
@@ -179,12 +182,17 @@ class ArmSimCore(CommandInput):
 
     def joint_state(self) -> JointStateData:
         """Positions, velocities and the torque the joints receive (after gearing, windings
-        and effort limits: what a joint torque sensor would read)."""
-        y = self.sim.state
+        and effort limits: what a joint torque sensor would read). With `sensors`, positions
+        and velocities are the readings (physics/sensing/), and `truth` the state itself,
+        same stamp (~/true_joint_states)."""
+        y, values = self.sim.state, self.config.values
         tau = self.sim.joint_torque(y)
-        return JointStateData(self.stamp_ns(), self.config.values["frame_id"],
-                              self.config.values["joint_names"], [y[0], y[1]], [y[2], y[3]],
-                              [float(tau[0]), float(tau[1])])
+        truth = JointStateData(self.stamp_ns(), values["frame_id"], values["joint_names"],
+                               [y[0], y[1]], [y[2], y[3]], [float(tau[0]), float(tau[1])])
+        if self.sim.scene.sensors is None:
+            return truth
+        r = self.sim.readings
+        return truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
 
     def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")

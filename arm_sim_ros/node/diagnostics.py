@@ -17,6 +17,7 @@ class JointStateData(NamedTuple):   # one a tick: a tuple is built in a third of
     position: list
     velocity: list
     effort: list
+    truth: JointStateData | None = None   # with sensors: the state itself (~/true_joint_states)
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,15 @@ def _per_arm(name: str, value, count: int, pair: bool) -> np.ndarray:
     return array
 
 
+def sampled_arm_by_arm(scene) -> str:
+    """What of the scene takes samples arm by arm, which a batch cannot ('' if nothing): a
+    discrete servo, sensors, a command delay."""
+    return " or ".join(what for what, named in (
+        ("a discrete servo (servo.rate)", (scene.servo or {}).get("rate")),
+        ("sensors", scene.sensors is not None), ("a command_delay", scene.command_delay))
+        if named)
+
+
 def _refuse_where(mask: np.ndarray, message: str) -> None:
     if mask.any():
         arm = int(np.argmax(mask.reshape(len(mask), -1).any(axis=1)))
@@ -75,8 +84,8 @@ class Batch:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
                              "are located arm by arm (physics/switching/events.py); run such a scene "
                              "one arm at a time (arm-sim run)")
-        if (scene.servo or {}).get("rate"):     # its samples are taken arm by arm
-            raise SceneError("batch rollouts cannot run a discrete servo (servo.rate); arm-sim run")
+        if sampled := sampled_arm_by_arm(scene):
+            raise SceneError(f"batch rollouts cannot run {sampled}; arm-sim run")
         if count is None:
             count = len(positions) if positions is not None else (
                 len(velocities) if velocities is not None else 1)

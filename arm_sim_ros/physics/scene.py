@@ -9,7 +9,6 @@ import difflib
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from functools import cached_property
 from math import inf, isfinite, pi, radians
 from pathlib import Path
 
@@ -18,8 +17,9 @@ from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEP
 from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
+from . import sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
-from .stepping.stability import unstiff_method
+from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
@@ -27,8 +27,11 @@ from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
               "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
-UNNAMED = "rk4, or exponential_rk4 where motor windings are stiff"   # integrator "" takes
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
+# Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
+# a validated mapping is built for its cross-checks.
+MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
+BUILT = BUILDERS | {"sensors": sensing.Sensors}
 
 
 class SceneError(ValueError):
@@ -59,6 +62,8 @@ class Scene:
     friction: dict | None = None
     joint_limits: dict | None = None
     servo: dict | None = None
+    sensors: dict | None = None      # what is read in place of the state (physics/sensing/)
+    command_delay: float = 0.0       # s: a command given at t acts from t + command_delay
     integrator: str = ""             # "": none named, the scene's `method` chooses one
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
@@ -74,9 +79,9 @@ class Scene:
         for f in fields(self):
             object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
                                                           getattr(self, f.name)))
-        if max(abs(v) for v in self.initial_positions) > MAX_ANGLE:
-            raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
-                             f"{MAX_ANGLE:g} rad in magnitude")
+        for key, at in (("initial_positions", self.initial_positions), ("setpoint", self.setpoint)):
+            if not max(abs(v) for v in at) <= MAX_ANGLE:     # a set-point: as commands' are
+                raise SceneError(f"{key} = {list(at)} is beyond {MAX_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:
@@ -130,6 +135,7 @@ class Scene:
         arm = self.arm
         try:
             effects = scene_effects(self)
+            sensing.check(self)          # whole numbers of steps
         except ParameterError as error:
             raise SceneError(str(error)) from None
         for effect in effects:
@@ -143,10 +149,8 @@ class Scene:
                                  "beyond double precision with these values; use values at a "
                                  "robot's scale")
 
-    @cached_property
-    def method(self) -> str:
-        """The integrator named, or where none is: exponential_rk4 where motor windings are
-        stiff at this step (stability.unstiff_method), else rk4."""
+    @property
+    def method(self) -> str:   # the integrator named, else stability.unstiff_method's choice
         return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
     @property
@@ -170,7 +174,7 @@ class Scene:
         merged = {}
         for key, value in overrides.items():
             effect, dot, parameter = key.partition(".")
-            if dot and effect in MAPPING_EFFECTS:
+            if dot and effect in MAPPINGS:
                 current = merged.get(effect, getattr(self, effect)) or {}
                 merged[effect] = dict(current) | {parameter: value}
             elif key in FIELD_KINDS:
@@ -208,7 +212,7 @@ class Scene:
 FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
                         "float" if f.type == "float" else "str") for f in fields(Scene)}
 FIELD_KINDS |= {"damping": "float_or_pair", "effort_limits": "pair_or_none"}
-FIELD_KINDS |= {name: "effect" for name in MAPPING_EFFECTS}
+FIELD_KINDS |= {name: "effect" for name in MAPPINGS}
 
 
 def _pair(value) -> tuple:
@@ -247,9 +251,9 @@ def coerce_value(name: str, kind: str, value):
         if value is None:
             return None
         try:
-            values = validate(name, MAPPING_EFFECTS[name].parameters, value)
-            if name in BUILDERS:
-                BUILDERS[name](**values)  # its cross-checks: windings all three or none ...
+            values = validate(name, MAPPINGS[name].parameters, value)
+            if name in BUILT:
+                BUILT[name](**values)     # its cross-checks: windings all three or none ...
         except ParameterError as error:
             raise SceneError(str(error)) from None
         return values
@@ -284,8 +288,8 @@ def _effect_value(name, parameter, value):
 def parse_value(key: str, text: str):
     """A value as the command line writes it: numbers, pairs as `1,0`, text."""
     effect, dot, name = key.partition(".")
-    if dot and effect in MAPPING_EFFECTS:
-        known = {p.name: p for p in MAPPING_EFFECTS[effect].parameters}
+    if dot and effect in MAPPINGS:
+        known = {p.name: p for p in MAPPINGS[effect].parameters}
         if name not in known:
             raise SceneError(f"{key} is not a key of {effect}; its keys: {', '.join(known)}")
         kind = known[name].kind

@@ -15,27 +15,32 @@ from __future__ import annotations
 
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from math import isfinite, nan
+from math import inf, isfinite, nan
 
 from .trust import accuracy, guard
 from .compiled import runs as compiled
 from . import model
 from .stepping import stability
 from .switching.events import switching as switching_for
-from .dynamics import build_dynamics
+from .dynamics import book_entries, build_dynamics
 from .effects import servo
+from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
 from .scene import Scene
 from .compiled.switch_run import Switched
-from .compiled.held import Settled
+from .compiled.held import Settled, settle
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
+# Event kinds that say what the simulator does as designed, not that anything went wrong:
+# a stick, slip or impact (switch), and the tolerance raising the sub-steps it takes
+# (substeps). Said at info; the others (a tolerance not met, a fault ...) are warnings.
+ROUTINE = ("switch", "substeps")
 
 
 @dataclass(frozen=True)
 class Event:
     """Something the simulator did that a person should hear about (kind: substepping,
-    fault, saturation)."""
+    substeps, switch, fault, saturation, books, accuracy, servo)."""
 
     t: float
     kind: str
@@ -59,6 +64,7 @@ class Sample:
     channels: dict = field(default_factory=dict)   # every channel by name
     inputs: float | None = None    # Σ input channels (None: the actuator work alone)
     losses: float | None = None    # Σ loss channels (None: the dissipated energy alone)
+    measured: tuple | None = None  # with sensors: (q1, q2, q̇1, q̇2) as read (sensing/)
 
     @property
     def total(self) -> float:
@@ -76,7 +82,9 @@ class Sample:
         return {"t": self.t, "q": list(self.q), "qd": list(self.qd), "tau": list(self.tau),
                 **self.extra, "kinetic": self.kinetic, "potential": self.potential,
                 "total": self.total, "work": self.work, "dissipated": self.dissipated,
-                "channels": dict(self.channels), "residual": self.residual}
+                "channels": dict(self.channels), "residual": self.residual} | (
+                    {} if self.measured is None else {"q_measured": list(self.measured[:2]),
+                                                      "qd_measured": list(self.measured[2:])})
 
 
 class Simulator:
@@ -119,7 +127,7 @@ class Simulator:
         self.fault = None            # why the latest refused step was refused, None if none
         self.refused_steps, self._refused_step = 0, -1    # how many; the latest's index
         self.saturated_steps = 0     # steps ending where a driver asks beyond its voltage limit
-        self.dynamics.command[:] = [0.0, 0.0]
+        self.dynamics.given[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
@@ -131,14 +139,14 @@ class Simulator:
         self.accuracy.reset()
         if self.sampled is not None:     # what the first sample will hold: no stale torque
             self.sampled.held[:] = self.sampled.law(self.state, torque_only=True)
+        if self.sensing is not None: self.sensing.reset(self)   # noqa: E701 (sample 0)
 
     @property
     def time(self) -> float:
         return self.steps * self.step_size
 
     def set_command(self, tau1: float, tau2: float, setpoints=None) -> None:
-        """The torque the `command` policies hold, and a servo's set-points, until the next
-        call (set_command below)."""
+        """The command and a servo's set-points, held until the next call (set_command)."""
         set_command(self, tau1, tau2, setpoints)
 
     def set_payload(self, mass: float) -> None:
@@ -158,13 +166,12 @@ class Simulator:
         """From the next step, `scene`'s effects; time, state and books kept (step size too)."""
         settle(self)
         carried, was = dict(zip(self.state_names, self.state)), self.books(self.state)
-        self._build(scene, self.dynamics.command)
+        self._build(scene, self.dynamics.given)
         self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
         self.retired = tuple(r + w - n for r, w, n in zip(self.retired, was, self.books(self.state)))
 
-    @property
-    def substeps_taken(self) -> int:   # in split steps since reset (accuracy.py, events.py)
-        return self.accuracy.taken(self.steps)
+    substeps_taken = property(lambda self: self.accuracy.taken(self.steps))   # split steps
+    readings = property(lambda self: readings(self))    # (q1, q2, q̇1, q̇2) as the sensors read
 
     @property
     def error_estimate(self) -> float:
@@ -192,6 +199,7 @@ class Simulator:
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
             return
+        if self.sensing is not None: self.sensing.before(self)   # noqa: E701 (sensing/)
         books = self.accuracy       # plain planned steps until a check is due: no wrapper
         take = books.plain if self.steps < books.due else books.check
         try:    # a discrete servo: the step split at its samples, each taken there
@@ -284,18 +292,20 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     """Simulator.set_command, servo `setpoints` {(field, joint): value}. A new command moves
     the local error at once: the next step is checked (accuracy.py), not the one the
     schedule had come to."""
-    before = commanded(sim)
-    sim.dynamics.command[0] = tau1
-    sim.dynamics.command[1] = tau2
+    before, torque = commanded(sim), tuple(sim.dynamics.given)
+    sim.dynamics.given[0] = tau1      # under a control loop: its input (sensing/loop.py)
+    sim.dynamics.given[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
     if commanded(sim) != before and not (sim.kernel is not None and sim.kernel.commanded(sim)):
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
+    if tuple(sim.dynamics.given) != torque and sim.accuracy.shadow is not None:
+        sim.accuracy.shadow.answered()        # a controller's answer (shadow.py)
 
 
 def commanded(sim: Simulator) -> tuple:
     """The command and a servo's set-points, as the step reads them."""
     joint_servo = servo.servo_of(sim.dynamics)
-    return (*sim.dynamics.command, *(joint_servo.setpoint if joint_servo is not None else ()))
+    return (*sim.dynamics.given, *(joint_servo.setpoint if joint_servo is not None else ()))
 
 
 def abs_residual(sim: Simulator) -> float:
@@ -303,13 +313,6 @@ def abs_residual(sim: Simulator) -> float:
     compiled step hands it out; the node books it every tick), else computed."""
     checked, residual = sim._checked
     return abs(residual) if checked is sim.state else abs(sim.residual())
-
-
-def book_entries(dynamics) -> tuple[list, list]:
-    """Where in the state the input channels are, and the loss channels."""
-    first = 4 + len(dynamics.extra)
-    return tuple([first + i for i, each in enumerate(dynamics.channel_kinds) if each == kind]
-                 for kind in ("input", "loss"))
 
 
 def saturation(sim: Simulator) -> None:
@@ -322,22 +325,16 @@ def saturation(sim: Simulator) -> None:
             sim._emit("saturation", f"motor driver saturates: {over}")
 
 
-def settle(sim: Simulator, keep: bool = True) -> None:
-    """What a compiled kernel holds back into the simulator's objects; `keep` False: forgotten
-    (they were put back, or are reset)."""
-    kernel = getattr(sim, "kernel", None)
-    if kernel is not None:
-        kernel.settle(sim) if keep else kernel.drop()
-
-
 def steppers(sim: Simulator, scene: Scene) -> None:
     """What steps the simulator: the switching stepper (friction, limits, clamps: events.py),
     the compiled step and runs (compiled.py, extra `fast`), and the error books."""
     sim.lowest_energy = guard.lowest_energy(sim)      # where the energy in play starts
     step = compiled.steps_for(sim.dynamics, sim._step)
+    sim.sensing = sensing.attach(sim, scene)   # readings and a control loop act between steps
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
-    sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
+    sim.kernel = None if sim.sensing is not None and sim.sensing.active else compiled.kernel_for(
+        sim.dynamics, sim._step, sim.switching or sim._driver)
     if sim.kernel is not None and sim.switching is not None and hasattr(step, "module"):
         sim.kernel.switched = Switched(step, sim._driver is not None)   # switch_run.py
     sim.path = getattr(step, "path", "python")
@@ -355,7 +352,9 @@ def books_for(sim: Simulator, scene: Scene, step):
         sim.dynamics, sim._tableau, step, sim.substeps, lambda kind, message: None, lambda: 0.0)
     return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
-                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate)
+                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate,
+                         sim.stability_ratio / (sim.stability_limit or inf),
+                         stability.stiff_names(sim.dynamics.active, sim.arm) or "damping")
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:
@@ -381,4 +380,19 @@ def sample(sim: Simulator) -> Sample:
                   kinetic=kinetic, potential=potential, work=channels.get("work", 0.0),
                   dissipated=channels.get("dissipated", 0.0), initial_energy=sim.initial_energy,
                   extra=dict(zip(sim.extra, y[4:4 + len(sim.extra)])),
-                  channels=channels, inputs=inputs, losses=losses)
+                  channels=channels, inputs=inputs, losses=losses,
+                  measured=sim.readings if sim.scene.sensors is not None else None)
+
+
+def readings(sim: Simulator) -> tuple:
+    """(q1, q2, q̇1, q̇2) as the sensors read them now (physics/sensing/): the state's own
+    without sensors that model something."""
+    return tuple(sim.state[:4]) if sim.sensing is None else sim.sensing.reading(sim)
+
+
+def recorded_row(sim) -> tuple:
+    """What a recording keeps of a step: the state; with sensors, the readings after it;
+    under a control loop (sensing/loop.py), the torque that acted over it."""
+    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
+    looped = sim.dynamics.command is not sim.dynamics.given
+    return row + tuple(sim.dynamics.command) if looped else row

@@ -35,7 +35,9 @@ def cmd_inspect(args) -> int:
 
     path = Path(args.recording)
     if not path.is_file():
-        raise UsageError(f"{args.recording}: no such file")
+        raise UsageError(f"{args.recording}: " + ("a directory, not a Rerun .rrd file (a "
+                                                  "bag? `arm-sim fit` reads bags)" if
+                                                  path.is_dir() else "no such file"))
     if args.every < 1:
         raise UsageError(f"--every {args.every} must be at least 1")
     try:

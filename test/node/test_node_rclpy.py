@@ -290,3 +290,30 @@ def test_a_set_the_core_cannot_apply_is_refused_and_the_node_goes_on(ros, monkey
     assert node.set_parameters([Parameter("damping", value=0.3)])[0].successful
     node.on_tick()
     peer.spin_until(lambda: peer.joint_states)
+
+
+@pytest.mark.parametrize("ros", [165], indirect=True)
+def test_sensors_readings_and_truth_are_the_offline_simulators_bit_for_bit(ros):
+    """/joint_states carries the readings, /arm_sim/true_joint_states the truth, same stamps,
+    equal to what the offline simulator reads after each tick (as on dds)."""
+    from node.test_sensors_node import SENSORS, offline
+
+    make_node, peer = ros
+    truths = []
+    peer.node.create_subscription(JointState, "/arm_sim/true_joint_states", truths.append, 1000)
+    node = make_node(**(SENSORS | {"publish_rate": 250.0, "step_size": 0.001,
+                                   "policy": "command_gravity_compensation"}))
+    node.on_tick()                        # the truth's publisher comes with the first truth
+    peer.spin_until(lambda: peer.node.count_publishers("/arm_sim/true_joint_states") > 0)
+    peer.send(node, (0.5, -0.2))
+    for _ in range(39):
+        node.on_tick()
+    peer.spin_until(lambda: len(peer.joint_states) >= 40 and truths and
+                    truths[-1].header.stamp == peer.joint_states[-1].header.stamp)
+    expected = offline(node.core, 40, commands={1: (0.5, -0.2)})
+    assert [list(m.position) + list(m.velocity) for m in peer.joint_states] == [
+        r for r, _ in expected]
+    first = 40 - len(truths)
+    assert [list(m.position) + list(m.velocity) for m in truths] == [
+        s for _, s in expected[first:]]
+    assert [m.header.stamp for m in truths] == [m.header.stamp for m in peer.joint_states[first:]]

@@ -13,6 +13,8 @@ from arm_sim_ros.physics.trust import accuracy, controller
 from arm_sim_ros.physics.compiled import build as compiled
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stepping import stability
+from physics.test_error_estimate import CASES
 
 pytest.importorskip("numba")
 if os.environ.get("ARM_SIM_COMPILED") == "0":      # .ci/run's pure-Python pass: its second
@@ -32,6 +34,12 @@ SCENES = {
     "release_tolerance_off": load_scene("release").replace(tolerance=0.0),
     "springs_fast_spin": load_scene("springs_oscillation").replace(
         initial_velocities=(30.0, -40.0)),
+    # contracting motions (test_error_estimate), at half the step and twice the damping
+    # (the same d h Lambda): a new count checked at the next step; near the stability limit,
+    # the shadow's local error measured where it is
+    **{name: CASES[name][0].replace(step_size=0.01, damping=2 * CASES[name][0].damping)
+       for name in ("damped_constant_torque_at_a_new_count",
+                    "damped_constant_torque_near_the_stability_limit")},
 }
 
 
@@ -87,7 +95,7 @@ def test_a_smooth_run_is_one_compiled_call_until_something_is_to_be_said(monkeyp
     monkeypatch.setattr(sim, "step_in_python", lambda: taken.append(sim.steps))
     sim.run(3.0)
     assert taken == [] and sim.steps == 300 and sim.state is sim._sound
-    assert not [e for e in sim.events if e.kind in ("substepping", "accuracy", "fault")]
+    assert not [e for e in sim.events if e.kind in ("substepping", "substeps", "accuracy", "fault")]
 
 
 def test_a_step_that_misses_the_tolerance_is_taken_again_in_the_compiled_loop(monkeypatch):
@@ -102,7 +110,7 @@ def test_a_step_that_misses_the_tolerance_is_taken_again_in_the_compiled_loop(mo
     monkeypatch.setattr(fast, "step_in_python", lambda: handed.append(fast.steps) or step())
     assert python.run(4.0) == fast.run(4.0)
     assert books(python) == books(fast)
-    said = [e for e in fast.events if e.kind == "substepping"]
+    said = [e for e in fast.events if e.kind in ("substepping", "substeps")]
     assert len(retaken) >= 5 and 0 < len(handed) <= len(said) < len(retaken)
 
 
@@ -116,6 +124,12 @@ def smooth_runs(draw):
     again, counts raised and lowered), a new command before each run."""
     scene = drawn_start(draw, load_scene(draw(st.sampled_from(SMOOTH))),
                         [0.0, 1e-9, 1e-7, 5e-5, 1e-3])
+    if scene.springs is None and scene.motors is None and draw(st.booleans()):
+        # damping up to past RK4's stability limit: steps that barely decay (the shadow's
+        # local error measured where it is), then sub-steps
+        edge = draw(st.floats(0.3, 1.3)) * stability.RK4_REAL_LIMIT
+        scene = scene.replace(damping=edge / (scene.step_size * stability.worst_stiffness(
+            scene.arm)))
     commands = [tuple(draw(st.floats(-10.0, 10.0)) for _ in (0, 1)) for _ in (0, 1, 2)]
     return scene, commands
 
@@ -222,6 +236,14 @@ def test_the_kernel_is_cached_under_the_hash_of_its_source_one_per_structure():
     path = Path(module.__file__)
     assert path.name == f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}.py"
     assert path.read_text() == source and math.isfinite(sims[1].state[0])
+
+
+def test_a_servo_scene_takes_pythons_path_on_every_interface():
+    """An effort joint reads no set-point list; were its scene compiled, a node switching
+    servo.interface live would stall 2 to 9 s in a compile (measured)."""
+    for interface in ("position", "velocity", "effort"):
+        scene = load_scene("servo_hold").replace(**{"servo.interface": [interface] * 2})
+        assert Simulator(scene).path == "python", interface
 
 
 def test_every_preset_without_a_servo_takes_the_compiled_path():

@@ -128,3 +128,20 @@ def test_a_skip_marker_is_recognised_only_right_before_its_block(tmp_path):
                     "<!-- not run: far away -->\n\ntext\n```python\nprint(1)\n```\n")
     assert [(lang, reason) for _, lang, _, reason in blocks(page)] == [
         ("bash", "needs ROS 2 sourced"), ("python", None)]
+
+
+def test_every_test_the_reliability_guide_names_exists():
+    """docs/guides/reliability.md gives each promise the test that holds it (a file, then
+    `::name` of a test in the file named last): each is there, so a renamed or removed
+    test shows here."""
+    text = (ROOT / "docs" / "guides" / "reliability.md").read_text()
+    named, last = 0, None
+    for found in re.finditer(r"`(test/[\w/]+\.py|test_\w+\.py)?(?:::(\w+))?`", text):
+        path, name = found.groups()
+        if path:
+            last = ROOT / path if path.startswith("test/") else next((ROOT / "test").rglob(path))
+            assert last.exists(), path
+        if name:
+            assert f"def {name}(" in last.read_text(), f"{last.name}::{name}"
+            named += 1
+    assert named >= 20

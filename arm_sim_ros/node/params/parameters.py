@@ -8,11 +8,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
-from ...physics.effects import MAPPING_EFFECTS, EffortLimits
+from ...physics.effects import EffortLimits
 from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
 from ...physics.model import ParameterError, brief
-from ...physics.scene import FIELD_KINDS, UNNAMED, Scene, SceneError, load_scene
+from ...physics.scene import (FIELD_KINDS, MAPPINGS, UNNAMED, Scene, SceneError,
+                              load_scene)
 from .recording_targets import rerun_path_problem, viewer_address_problem
 from .values import ParameterRefused, coerce
 
@@ -94,16 +95,17 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
-        {"pair": "float_pair", "names": "str_list"}.get(parameter.kind, "float"),
+        {"pair": "float_pair", "names": "str_list", "choice": "str"}.get(parameter.kind, "float"),
         _effect_value(effect, key),
         f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
         when=START if effect in START_ONLY_WHY else KEPT)
 
 
-# One parameter per scene key of every effect, named and checked as the scene file names and
-# checks it (`friction.coulomb`); generated from the effects' own key lists.
+# One parameter per scene key of every effect and of the sensors, named and checked as the
+# scene file names and checks it (`friction.coulomb`, `sensors.delay`); generated from their
+# own key lists.
 EFFECT_PARAMETERS = (_effect_spec("effort_limits", None, EffortLimits.parameter),) + tuple(
-    _effect_spec(effect, p.name, p) for effect, kind in MAPPING_EFFECTS.items()
+    _effect_spec(effect, p.name, p) for effect, kind in MAPPINGS.items()
     for p in kind.parameters)
 
 
@@ -120,6 +122,8 @@ PARAMETERS = (
     _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)",
                 when=KEPT),
     *EFFECT_PARAMETERS,
+    _scene_spec("command_delay", "float", "s from a command (torque, set-point, the policy's or "
+                "servo's torque) to when it acts; a whole number of steps (0 = none)", when=KEPT),
     _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
     _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
     _scene_spec("link_lengths", "float_pair", "[l1, l2] m"),
@@ -164,9 +168,10 @@ PARAMETERS = (
                   "start + simulated time)", when=START),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
-    ParameterSpec("lockstep_wait", "float", 0.0, "in lockstep, a tick of its own once no "
-                  "command came for this long (wall s; 0 = never): controller_manager under "
-                  "use_sim_time waits for the clock to move before it commands"),
+    ParameterSpec("lockstep_wait", "float", 0.1, "in lockstep, while a node listens on "
+                  "/clock, a tick of its own once no command came for this long (wall s; 0 = "
+                  "never): controller_manager under use_sim_time waits for the clock to move "
+                  "before it commands"),
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
@@ -178,7 +183,7 @@ START_ONLY = tuple(s.name for s in sorted(PARAMETERS, key=lambda s: s.effect is 
 READ_ONLY = ("scene", "robot_description")   # declared read-only (both transports)
 EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFECT_PARAMETERS
                                if s.name.startswith(effect + "."))
-                 for effect in MAPPING_EFFECTS}     # mapping effect -> (parameter, key) pairs
+                 for effect in MAPPINGS}     # mapping effect -> (parameter, key) pairs
 
 
 def when_changed(name: str) -> str:

@@ -243,10 +243,12 @@ def load(source: str):
 
 
 def compilable(dynamics, step) -> bool:
-    """numba on, a fixed step, and every constant the rhs reads a number (a servo's
-    set-points are a list the node changes: Python's path; MIN and MAX, the clamps'
-    functions, become min and max)."""
+    """numba on, a fixed step, no servo, and every constant the rhs reads a number (MIN and
+    MAX, the clamps' functions, become min and max). A servo's set-points are a list the node
+    changes: Python's path, on every interface (an effort joint reads none), so that a switch
+    of interface while the node runs never meets a first compile (seconds without a tick)."""
     values = dynamics.function.__globals__
     names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source)) - {"MIN", "MAX"}
     return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
+            and not any(effect.name == "servo" for effect in dynamics.active)
             and all(isinstance(values.get(n, 0.0), (int, float)) for n in names))

@@ -10,7 +10,7 @@ read).
     F   h, E(0), the retired inputs and losses, the largest |residual|, the shadow's
         largest distance, the energy in play, the error estimate, the controller's previous
         ratio, tolerance, SAFETY x target, target, Richardson's factor, the lowest energy,
-        the order
+        the order, the count below which steps are measured at the shadow (stiff_below)
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def pack(kernel, sim, books) -> None:
         I[:] = (sim.steps, NEVER, sim.steps, 0, n, 1, n, n, n, n, 1, 4, 4, 0, 0, 0, 1,
                 sim.books_fault is not None)
         F[:] = (h, sim.initial_energy, *sim.retired, 0.0, 0.0, sim.energy_in_play,
-                books.error_estimate, 1.0, 0.0, 1.0, 1.0, 1.0, sim.lowest_energy, 4.0)
+                books.error_estimate, 1.0, 0.0, 1.0, 1.0, 1.0, sim.lowest_energy, 4.0, 0.0)
         return
     shadow, n = books.shadow, books.states
     known = shadow.local is not None
@@ -47,7 +47,7 @@ def pack(kernel, sim, books) -> None:
     F[:] = (h, sim.initial_energy, *sim.retired, 0.0, shadow.largest, sim.energy_in_play,
             books.error_estimate, books.free.previous, books.tolerance,
             SAFETY * books.target(h), books.target(h), books.factor, sim.lowest_energy,
-            float(books.order))
+            float(books.order), books.stiff_below)
 
 
 def unpack(kernel, sim, books, sound: int) -> None:
@@ -92,3 +92,11 @@ class Settled:
 
     def __set__(self, sim, value):
         sim.__dict__[self.key] = value
+
+
+def settle(sim, keep: bool = True) -> None:
+    """What a compiled kernel holds back into the simulator's objects; `keep` False: forgotten
+    (they were put back, or are reset)."""
+    kernel = getattr(sim, "kernel", None)
+    if kernel is not None:
+        kernel.settle(sim) if keep else kernel.drop()

@@ -37,7 +37,7 @@ class Kernel:
         width = 4 + len(dynamics.extra) + len(dynamics.channels)
         self.y, self.z, self.L, self.O, self.G, self.S, self.D, self.r = (
             np.zeros(width) for _ in range(8))      # r: the residual's, apart from the run's
-        self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(15)
+        self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(16)
         self.command = dynamics.command
         self.switched = None      # a switching scene's runs in one mode (switch_run.py)
         self.held = None          # (run, K, more, books) whose books the arrays hold

@@ -41,6 +41,7 @@ import rerun as rr
 
 from .arm3d import arm3d_for
 from .blueprint import blueprint
+from ...physics.simulator import ROUTINE, recorded_row
 from ..readouts import Snapshot, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks
 from .static_data import StaticData
@@ -119,7 +120,7 @@ class RerunRecorder:
 
     def step(self, sim) -> None:
         """After a physics step: keep its state and its error books (see step_batch)."""
-        self.step_batch(sim, (sim.state,))
+        self.step_batch(sim, (recorded_row(sim),))
 
     def step_batch(self, sim, states, books=()) -> None:
         """After len(states) physics steps: their states in order, the last being sim.state,
@@ -173,7 +174,8 @@ class RerunRecorder:
 
     def _on_sim_event(self, event) -> None:
         """At the step it came in (event.t: its start), though its states come later."""
-        self.event(f"{event.kind}: {event.message}", "error" if event.kind == "fault" else "warn",
+        level = "error" if event.kind == "fault" else "info" if event.kind in ROUTINE else "warn"
+        self.event(f"{event.kind}: {event.message}", level,
                    round(event.t / self.sim.step_size) + 1 - self._next)
 
     def event(self, text: str, level: str = "info", ahead: int = 0) -> None:

@@ -9,7 +9,8 @@ with `torque_topic`, the latest command on `joint_torque_commands` (Float64Multi
 bag time, zero before the first.
 
 From a CSV: the columns `arm-sim run --csv` writes (t, q1, q2, qd1, qd2, tau1, tau2; others
-ignored). Every problem (no such topic, names that do not match, too few, non-finite or
+ignored; a run with sensors: q1_measured ... qd2_measured in place of the truth, as
+/joint_states carries them). Every problem (no such topic, names that do not match, too few, non-finite or
 unevenly spaced samples) is one line: FitError.
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ...usage import UsageError
 MIN_SAMPLES = 50          # fewer cannot hold a segment, a validation segment and the noise
 JITTER = 0.25             # a sample interval may differ from the median by this fraction
 CSV_NEEDED = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2")
+CSV_MEASURED = ("q1_measured", "q2_measured", "qd1_measured", "qd2_measured")   # sensors
 TORQUE_TOPICS = ("/" + COMMAND_TOPIC, "/" + JOINT_COMMANDS_TOPIC)
 
 
@@ -95,17 +97,19 @@ def checked(source: str, t, q, qd, tau) -> Recording:
 
 
 def _read_csv(path: Path):
-    try:
-        with open(path, newline="") as stream:
+    try:    # utf-8-sig: a spreadsheet's byte-order mark is not part of the first column's name
+        with open(path, newline="", encoding="utf-8-sig") as stream:
             rows = list(csv.reader(stream))
     except (OSError, UnicodeDecodeError) as error:
         raise FitError(f"cannot read {path}: {getattr(error, 'strerror', None) or error}") from None
-    header = rows[0] if rows else []
+    header = [name.strip() for name in rows[0]] if rows else []
     missing = [c for c in CSV_NEEDED if c not in header]
     if missing:
         raise FitError(f"{path}: no column {', '.join(missing)}; a fit reads "
                        f"{', '.join(CSV_NEEDED)} (as `arm-sim run --csv` writes them)")
     index = [header.index(c) for c in CSV_NEEDED]
+    if all(c in header for c in CSV_MEASURED):      # made with sensors: what they read
+        index[1:5] = [header.index(c) for c in CSV_MEASURED]
     try:
         data = np.array([[float(row[i]) for i in index] for row in rows[1:]], dtype=float)
     except (ValueError, IndexError):
@@ -114,9 +118,19 @@ def _read_csv(path: Path):
     return data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5:7]
 
 
+def _brief(error: Exception, limit: int = 100) -> str:
+    """rosbags' message on one line, cut at `limit` characters: a damaged message
+    definition is quoted whole, over many lines."""
+    line = " ".join(str(error).split())
+    return (line[:limit] + " ...") if len(line) > limit else (line or "no detail")
+
+
 def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
     from rosbags.highlevel import AnyReader, AnyReaderError
 
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        raise FitError(f"cannot read bag {path}: it holds no metadata.yaml (a rosbag2 "
+                       "directory does; `ros2 bag reindex` writes one)")
     wanted = None if torque_topic is None else "/" + torque_topic.lstrip("/")
     if wanted is not None and wanted not in TORQUE_TOPICS:
         raise FitError(f"--torque-topic {torque_topic}: one of {', '.join(TORQUE_TOPICS)}")
@@ -135,8 +149,15 @@ def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
             commands = [] if wanted is None else [
                 (log_time, _command(bag.deserialize(raw, c.msgtype), joints))
                 for c, log_time, raw in bag.messages(connections=[topics[wanted]])]
+    except FitError:
+        raise
+    except OSError as error:
+        raise FitError(f"cannot read bag {path}: {error.strerror or error}") from None
     except AnyReaderError as error:
-        raise FitError(f"cannot read bag {path}: {error}") from None
+        raise FitError(f"cannot read bag {path}: {_brief(error)}") from None
+    except Exception as error:  # noqa: BLE001 - corrupt bytes fail in a dozen ways in rosbags
+        raise FitError(f"cannot read bag {path}: it is damaged ({type(error).__name__}: "
+                       f"{_brief(error)})") from None
     if not samples:
         raise FitError(f"{path}: /{JOINT_STATES_TOPIC} holds no message")
     stamps = np.array([s[0] for s in samples], dtype=np.int64)

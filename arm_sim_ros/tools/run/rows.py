@@ -9,6 +9,7 @@ state, as the node publishes it.
 """
 from __future__ import annotations
 
+from ...physics.simulator import recorded_row
 from ...recording.readouts import error_books
 
 
@@ -23,7 +24,7 @@ class ChunkSteps:
 
     def on_step(self, sim) -> None:
         if self.batched:
-            self.states.append(sim.state)
+            self.states.append(recorded_row(sim))
             if self.every and sim.steps % self.every == 0:
                 self.books.extend(error_books(sim))
         for step in self.each:
