@@ -173,6 +173,7 @@ def stepped_runs(draw):
     return scene, commands
 
 
+@pytest.mark.hunt          # 12 examples ~35 s (divergent switching scenes in Python)
 @fuzz(12)
 @given(case=stepped_runs())
 def test_random_stepped_runs_leave_what_python_leaves(case, monkeypatch):
