@@ -1,14 +1,20 @@
-"""Where the time goes: Simulator.run per preset, pure Python against compiled (extra `fast`),
-beside MuJoCo 4.0's RK4 on the same scene and the compiled limit; Batch against
-mujoco.rollout; and the windings integrated exactly (exponential_rk4) against rk4's
-sub-steps and MuJoCo's first-order dcmotor at equal step size.
+"""Where the time goes: Simulator.step (the node's path) and Simulator.run per preset, pure
+Python against compiled (extra `fast`), beside MuJoCo 4.0's RK4 on the same scene (mj_step
+called from Python) and the compiled limit; a windings scene naming no integrator against
+the plain arm; Batch against mujoco.rollout; and the windings integrated exactly
+(exponential_rk4) against rk4's sub-steps and MuJoCo's first-order dcmotor at equal step.
 
-Columns (µs per simulated second, and steps per second):
-  python     Simulator.run with ARM_SIM_COMPILED=0 (today's path), default tolerance
-  compiled   Simulator.run on the compiled path (compiled.py), the same steps bit for bit:
+Simulator.step table: µs per step at h = 1 ms, python and compiled (one compiled call per
+step: compiled/runs.py), estimate global (default tolerance) and off, mj_step and the
+limit (the bare loop's cost per step), interleaved.
+
+Presets table (µs per simulated second, and steps per second):
+  python     Simulator.run with ARM_SIM_COMPILED=0, default tolerance
+  compiled   Simulator.run on the compiled path (compiled/), the same steps bit for bit:
              runs of plain steps in one call; switching scenes (events.py) too, each run
              of steps in one mode where nothing can switch (switch_run.py), the others
              from Python
+  off        compiled, estimate off (no shadow, no checks; tolerance 0)
   mujoco     mj_step in a Python loop, RK4, the scene built by tools/mujoco_peer (only where
              it models the same physics: no soft friction or limits, no controller model)
   limit      the bare compiled RK4 loop on the same right-hand side (the planned sub-steps,
@@ -17,8 +23,11 @@ Columns (µs per simulated second, and steps per second):
              it splits steps to meet it (release: where the elbow whips)
   of same    compiled against the limit taking as many sub-steps: what the error books,
              the energy books and the switches cost beyond the steps themselves
+  off of     off against the limit at the planned sub-steps (which off takes)
 Each keeps the fastest of --repeat runs of --seconds simulated seconds after one warm-up run
-(`first`: that run, compiling what it meets or loading it from the cache).
+(`first`: that run, compiling what it meets or loading it from the cache), timed in CPU
+seconds of this process (the machine is shared: wall time would count the others' work),
+Batch in wall seconds (its threads share the work).
 
     pip install -e '.[bench,fast]'
     nice python benchmarks/bench_speed.py [--seconds 2] [--repeat 3] [--arms 20000]
@@ -44,12 +53,15 @@ from arm_sim_ros.physics.simulator import Simulator  # noqa: E402
 from arm_sim_ros.tools.accuracy import mujoco_peer  # noqa: E402
 
 
-def fastest(run, repeat: int) -> float:
+def fastest(run, repeat: int, clock=time.process_time) -> float:
+    """The least time of `repeat` runs: CPU time of this process (single-threaded work: a
+    machine shared with other jobs preempts it, which wall time would count), or wall
+    time where threads share the work (clock=time.perf_counter)."""
     best = math.inf
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = clock()
         run()
-        best = min(best, time.perf_counter() - start)
+        best = min(best, clock() - start)
     return best
 
 
@@ -124,29 +136,130 @@ def time_mujoco(scene, seconds: float, repeat: int):
 
 
 def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
-    head = (f"{'preset':<30}{'h':>7}{'sub':>4} {'python':>9} {'compiled':>9} {'mujoco':>9} "
-            f"{'limit':>8} {'speed-up':>8} {'of limit':>8} {'sub/step':>8} {'of same':>8}  "
-            "path / first compile")
-    lines = [f"µs per simulated second (steps/s below each), {seconds:g} s runs, best of {repeat}",
-             head, "-" * len(head)]
+    head = (f"{'preset':<30}{'h':>7}{'sub':>4} {'python':>9} {'compiled':>9} {'off':>8} "
+            f"{'mujoco':>9} {'limit':>8} {'speed-up':>8} {'sub/step':>8} {'of same':>8} "
+            f"{'off of':>7}  path / first compile")
+    lines = [f"Simulator.run, µs per simulated second (steps/s below each), {seconds:g} s runs, "
+             f"best of {repeat}", head, "-" * len(head)]
     for name in only or preset_names():
         scene = load_scene(name)
         py, _, _ = time_run(scene, seconds, repeat, False)
         fast, path, first = time_run(scene, seconds, repeat, True)
+        off, _, _ = time_run(scene.replace(estimate="off", tolerance=0.0), seconds, repeat, True)
         limit = time_limit(scene, seconds, repeat)
         theirs, why = time_mujoco(scene, seconds, repeat)
         steps = scene.steps_for(seconds)
-        per = lambda t: f"{t / seconds * 1e6:>9.0f}" if t is not None else f"{'-':>9}"
-        rate = lambda t: f"{steps / t:>9.3g}" if t is not None else f"{'':>9}"
+        per = lambda t, w=9: f"{t / seconds * 1e6:>{w}.0f}" if t is not None else f"{'-':>{w}}"
+        rate = lambda t, w=9: f"{steps / t:>{w}.3g}" if t is not None else f"{'':>{w}}"
         sub = Simulator(scene).substeps
-        ratio = lambda a, b: f"{a / b:>7.1f}x" if b else f"{'-':>8}"
+        ratio = lambda a, b, w=8: f"{a / b:>{w - 1}.1f}x" if b else f"{'-':>{w}}"
         taken = substeps_per_step(scene, seconds)     # the limit at the run's own count
         same = limit * taken / sub if limit else None
-        lines.append(f"{name:<30}{scene.step_size:>7g}{sub:>4} {per(py)} {per(fast)} {per(theirs)}"
-                     f"{per(limit)[1:]} {py / fast:>7.1f}x {ratio(fast, limit)} {taken:>8.2f} "
-                     f"{ratio(fast, same)}  "
+        lines.append(f"{name:<30}{scene.step_size:>7g}{sub:>4} {per(py)} {per(fast)} "
+                     f"{per(off, 8)} {per(theirs)} {per(limit, 8)} {py / fast:>7.1f}x "
+                     f"{taken:>8.2f} {ratio(fast, same)} {ratio(off, limit, 7)}  "
                      f"{'compiled' if 'numba' in path else 'python'} {first:.2f} s {why}")
-        lines.append(f"{'':<41} {rate(py)} {rate(fast)} {rate(theirs)}{rate(limit)[1:]}")
+        lines.append(f"{'':<41} {rate(py)} {rate(fast)} {rate(off, 8)} {rate(theirs)} "
+                     f"{rate(limit, 8)}")
+    return lines
+
+
+def step_table(repeat: int, steps: int = 2000) -> list[str]:
+    """Simulator.step (the node's path) one call per step, compiled and pure Python, beside
+    Simulator.run (compiled, the same steps in one call), mj_step called from Python and the
+    compiled limit, h = 1 ms, interleaved, best of `repeat` rounds of `steps` steps."""
+    lines = [f"Simulator.step at h = 1 ms, µs per step (CPU), {steps} steps, interleaved, best "
+             f"of {repeat}", f"{'scene':<12}{'estimate':>9} {'python':>8} {'compiled':>9} "
+             f"{'run':>7} {'mj_step':>8} {'limit':>7} {'python/compiled':>16} "
+             f"{'mj_step/compiled':>17} {'compiled/run':>13}", "-" * 112]
+    for name in ("release", "stick_slip"):
+        for estimate in ("global", "off"):
+            scene = load_scene(name).replace(step_size=0.001)
+            if estimate == "off":
+                scene = scene.replace(estimate="off", tolerance=0.0)
+            timed = {"python": stepped(simulator(scene, False), steps),
+                     "compiled": stepped(simulator(scene, True), steps),
+                     "run": ran(simulator(scene, True), steps)}
+            if name == "release":
+                timed["mj_step"] = mujoco_steps(scene, steps)
+            limit = time_limit(scene, steps * scene.step_size, 1)
+            best = {key: math.inf for key in timed}
+            for _ in range(repeat):                   # interleaved: the same load for each
+                for key, run in timed.items():
+                    best[key] = min(best[key], fastest(run, 1))
+            per = {key: best[key] / steps * 1e6 for key in best}
+            mj = per.get("mj_step", math.nan)
+            lines.append(
+                f"{name:<12}{estimate:>9} {per['python']:>8.2f} {per['compiled']:>9.2f} "
+                f"{per['run']:>7.3f} {mj:>8.2f} "
+                f"{limit / steps * 1e6 if limit else math.nan:>7.3f} "
+                f"{per['python'] / per['compiled']:>15.1f}x {mj / per['compiled']:>16.2f}x "
+                f"{per['compiled'] / per['run']:>12.1f}x")
+    return lines
+
+
+def ran(sim, steps: int):
+    """Simulator.run over `steps` steps from the scene's start, one compiled call (warmed)."""
+    def run():
+        sim.reset()
+        sim.run(steps * sim.step_size)
+    run()
+    return run
+
+
+def stepped(sim, steps: int):
+    """A run of `steps` Simulator.step calls from the scene's start (warmed once)."""
+    def run():
+        sim.reset()
+        for _ in range(steps):
+            sim.step()
+    run()
+    return run
+
+
+def mujoco_steps(scene, steps: int):
+    import mujoco
+    model, ctrl = mujoco_peer.mujoco_model(scene, "RK4")
+    data = mujoco_peer.mujoco_data(model, scene, ctrl)
+    step = mujoco.mj_step
+
+    def run():
+        mujoco_peer.reset(model, data, scene, ctrl)
+        for _ in range(steps):
+            step(model, data)
+    return run
+
+
+def unnamed_windings_table(seconds: float, repeat: int, long: float = 20.0) -> list[str]:
+    """A windings scene that names no integrator (motor_windings_hold, h = 1 ms: L/R =
+    0.53 ms, and the issue's L/R = 10 µs) against the plain arm (the same pose and policy,
+    no motors), the windings at 0.53 ms, and the same windings on rk4 with its sub-steps:
+    Simulator.run at the default tolerance, compiled over `long` seconds (the windings'
+    first transient, which the tolerance sub-steps, amortised as in the issue's 20 s), pure
+    Python over `seconds`."""
+    windings = load_scene("motor_windings_hold")
+    plain = windings.replace(motors=None)
+    stiff = windings.replace(motors=dict(windings.motors, inductance=tuple(
+        1e-5 * r for r in windings.motors["resistance"])))      # L/R = 10 µs
+    rows = [("plain arm (no motors)", plain)]
+    for what, scene in (("L/R 0.53 ms", windings), ("L/R 10 µs", stiff)):
+        rows += [(f"windings {what}, unnamed ({scene.method})", scene),
+                 (f"windings {what}, rk4 named", scene.replace(integrator="rk4"))]
+    lines = [f"A windings scene naming no integrator, h = 1 ms, Simulator.run, µs per simulated "
+             f"second: python {seconds:g} s runs, compiled {long:g} s runs, best of {repeat}",
+             f"{'scene':<48}{'sub':>4} {'python':>9} {'of plain':>9} {'compiled':>9} "
+             f"{'of plain':>9} {'of 0.53 ms':>10}", "-" * 104]
+    base = {}
+    for label, scene in rows:
+        py, _, _ = time_run(scene, seconds, repeat, False)
+        fast, _, _ = time_run(scene, long, repeat, True)
+        base = base or {"py": py, "fast": fast}
+        if scene is windings:
+            base["ms"] = fast
+        lines.append(f"{label:<48}{Simulator(scene).substeps:>4} {py / seconds * 1e6:>9.0f} "
+                     f"{py / base['py']:>8.2f}x {fast / long * 1e6:>9.0f} "
+                     f"{fast / base['fast']:>8.2f}x "
+                     + (f"{fast / base['ms']:>9.2f}x" if "ms" in base else f"{'-':>10}"))
     return lines
 
 
@@ -170,7 +283,8 @@ def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
         def run():
             batch.reset()
             batch.run(steps, threads)
-        lines.append(f"{label:<28}{arms * steps / fastest(run, repeat) / 1e6:>8.2f}")
+        elapsed = fastest(run, repeat, time.perf_counter)
+        lines.append(f"{label:<28}{arms * steps / elapsed / 1e6:>8.2f}")
     model, ctrl = mujoco_peer.mujoco_model(scene, "RK4")
     datas = [mujoco.MjData(model) for _ in range(2)]
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -183,7 +297,7 @@ def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
         with rollout.Rollout(nthread=threads) as pool:
             pool.rollout(model, datas[:threads], initial, nstep=steps)
             elapsed = fastest(lambda: pool.rollout(model, datas[:threads], initial, nstep=steps),
-                              repeat)
+                              repeat, time.perf_counter)
         lines.append(f"{f'mujoco.rollout, {threads} thread(s)':<28}{arms * steps / elapsed / 1e6:>8.2f}")
     return lines
 
@@ -239,6 +353,8 @@ def main() -> None:
     parser.add_argument("--arms", type=int, default=20000)
     parser.add_argument("--batch-steps", type=int, default=500)
     parser.add_argument("--only", help="these presets (comma-separated) alone, no other table")
+    parser.add_argument("--tables", default=",".join(TABLES),
+                        help=f"which tables, comma-separated, of {', '.join(TABLES)} (all)")
     args = parser.parse_args()
     if not compiled.available():
         sys.exit("bench_speed: numba is not installed: pip install -e '.[fast]'")
@@ -249,10 +365,18 @@ def main() -> None:
     if args.only:
         print("\n".join(presets_table(args.seconds, args.repeat, args.only.split(","))))
         return
-    for table in (presets_table(args.seconds, args.repeat),
-                  batch_table(args.arms, args.batch_steps, args.repeat),
-                  windings_table(args.repeat)):
-        print("\n".join(table) + "\n", flush=True)
+    tables = {"step": lambda: step_table(max(5, args.repeat)),
+              "presets": lambda: presets_table(args.seconds, args.repeat),
+              "unnamed": lambda: unnamed_windings_table(args.seconds, args.repeat),
+              "batch": lambda: batch_table(args.arms, args.batch_steps, args.repeat),
+              "windings": lambda: windings_table(args.repeat)}
+    for name in args.tables.split(","):
+        if name not in tables:
+            sys.exit(f"bench_speed: no table {name!r}; choose from {', '.join(TABLES)}")
+        print("\n".join(tables[name]()) + "\n", flush=True)
+
+
+TABLES = ("step", "presets", "unnamed", "batch", "windings")
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, load_scene
 from ..physics.urdf.read import changed_values, read_urdf
-from ..physics.simulator import ROUTINE, Simulator
+from ..physics.simulator import ROUTINE, Simulator, abs_residual
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -173,7 +173,7 @@ class ArmSimCore(CommandInput):
                            f"{sim.time:.6f} s); holding until reset")
             self.recorder.event("integration not finite: holding", "error")
             return
-        residual = abs(sim.residual())
+        residual = abs_residual(sim)    # the divergence check's, computed once
         if residual > self.max_abs_residual:      # as max() keeps it, NaN included
             self.max_abs_residual = residual
 

@@ -77,8 +77,8 @@ class Batch:
         if unknown:
             raise SceneError(f"{unknown[0]!r} cannot vary per arm; per-arm parameters: "
                              f"{', '.join(SCALAR_PARAMETERS + PAIR_PARAMETERS)}")
-        if scene.integrator not in ("rk4", "exponential_rk4"):   # steps that run on arrays too
-            raise SceneError(f"batch rollouts use rk4 or exponential_rk4, not {scene.integrator!r}")
+        if scene.method not in ("rk4", "exponential_rk4"):   # steps that run on arrays too
+            raise SceneError(f"batch rollouts use rk4 or exponential_rk4, not {scene.method!r}")
         switching = [name for name in ("friction", "joint_limits") if getattr(scene, name)]
         if switching:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
@@ -159,7 +159,7 @@ class Batch:
         self._namespace = dict(dynamics.function.__globals__, cos=np.cos, sin=np.sin,
                                MIN=np.minimum, MAX=np.maximum)
         self._code = compile(dynamics.source, f"<batch rhs {scene.policy}>", "exec")
-        self._step = step_for(INTEGRATORS[scene.integrator], len(self.channels), dynamics.decay)
+        self._step = step_for(INTEGRATORS[scene.method], len(self.channels), dynamics.decay)
         self.substeps = self._worst_substeps(scene, v, arm)
         self._kernel = None
         if compiled.compilable(dynamics, self._step):   # every arm in one compiled call

@@ -196,3 +196,10 @@ def build_dynamics(scene, command=None) -> Dynamics:
                         command if acting is None else acting, label=scene.policy)
     dynamics.given = command
     return dynamics
+
+
+def book_entries(dynamics) -> tuple[list, list]:
+    """Where in the state the input channels are, and the loss channels."""
+    first = 4 + len(dynamics.extra)
+    return tuple([first + i for i, each in enumerate(dynamics.channel_kinds) if each == kind]
+                 for kind in ("input", "loss"))

@@ -19,6 +19,7 @@ from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, Effor
                       JointLimits, Motors, scene_effects, validate)
 from . import sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
+from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
@@ -63,7 +64,7 @@ class Scene:
     servo: dict | None = None
     sensors: dict | None = None      # what is read in place of the state (physics/sensing/)
     command_delay: float = 0.0       # s: a command given at t acts from t + command_delay
-    integrator: str = "rk4"
+    integrator: str = ""             # "": none named, the scene's `method` chooses one
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
@@ -92,9 +93,9 @@ class Scene:
         if self.servo is not None and self.policy not in SERVO_POLICIES:
             raise SceneError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
                              f"{self.policy!r}")
-        if self.integrator not in INTEGRATORS:
+        if self.integrator and self.integrator not in INTEGRATORS:
             raise SceneError(f"integrator {self.integrator!r} is unknown; choose one of "
-                             f"{', '.join(INTEGRATORS)}")
+                             f"{', '.join(INTEGRATORS)}, or name none (\"\": {UNNAMED})")
         for name in ("rtol", "atol"):
             if not getattr(self, name) >= 1e-14:
                 raise SceneError(f"{name} = {getattr(self, name)} must be at least 1e-14 "
@@ -147,6 +148,10 @@ class Scene:
                                  "(1/s) and frequency (rad/s), which set the step plan, are "
                                  "beyond double precision with these values; use values at a "
                                  "robot's scale")
+
+    @property
+    def method(self) -> str:   # the integrator named, else stability.unstiff_method's choice
+        return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
     @property
     def links(self) -> ArmParameters:

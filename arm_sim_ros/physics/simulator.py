@@ -6,7 +6,8 @@ cannot make it skip or drift.
 At the stability limit (stability.py) a step is split into equal sub-steps, and a step
 that would leave the finite numbers is refused: the last finite state is kept and
 `fault` says why; so is every step after a state that diverged while finite (guard.py:
-energy from nothing), until reset. Both are reported in `events`. A motor driver asked for more than its
+energy from nothing, checked at every state as it is made), until reset. Both are
+reported in `events`. A motor driver asked for more than its
 voltage limit (checked at the state each step ends in) is counted in `saturated_steps`
 and reported once, the first time, as a `saturation` event.
 """
@@ -21,12 +22,13 @@ from .compiled import runs as compiled
 from . import model
 from .stepping import stability
 from .switching.events import switching as switching_for
-from .dynamics import build_dynamics
+from .dynamics import book_entries, build_dynamics
 from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
 from .scene import Scene
 from .compiled.switch_run import Switched
+from .compiled.held import Settled, settle
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 # Event kinds that say what the simulator does as designed, not that anything went wrong:
@@ -86,9 +88,12 @@ class Sample:
 
 
 class Simulator:
+    # the error books, energy in play, latest sound state: a compiled kernel holds them
+    accuracy, energy_in_play, _sound = Settled(), Settled(), Settled()
+
     def __init__(self, scene: Scene):
         self.scene, self.step_size, self._tableau = scene, scene.step_size, INTEGRATORS[
-            scene.integrator]
+            scene.method]
         self.events: deque = deque(maxlen=EVENT_LOG_LENGTH)
         self.event_listeners: list = []     # callables(Event), e.g. the Rerun sink
         self.steps = 0
@@ -105,10 +110,7 @@ class Simulator:
         self._rhs = self.dynamics.function
         self._step = step_for(self._tableau, len(self.channels), self.dynamics.decay,
                               rtol=scene.rtol, atol=scene.atol)
-        first = 4 + len(self.extra)
-        kinds = self.dynamics.channel_kinds
-        self._inputs = [first + i for i, kind in enumerate(kinds) if kind == "input"]
-        self._losses = [first + i for i, kind in enumerate(kinds) if kind == "loss"]
+        self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
             self._tableau, self.dynamics.active, self.arm, self.step_size)
         if message:
@@ -117,6 +119,7 @@ class Simulator:
         steppers(self, scene)   # switches located, compiled steps, error books
 
     def reset(self) -> None:
+        settle(self, keep=False)     # what a compiled kernel held is of the run before
         s = self.scene
         self.state = ((*s.initial_positions, *s.initial_velocities)
                       + (0.0,) * (len(self.extra) + len(self.channels)))
@@ -129,6 +132,7 @@ class Simulator:
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
         self._sound = self.state     # the latest state the divergence check found sound
+        self._checked = (None, 0.0)  # (the latest state checked, its residual)
         self.energy_in_play = guard.in_play(self, self.state)   # the most seen (guard.py)
         self.books_fault = None      # why the energy books do not close, said once
         self.switch_events = self.switching.reset() if self.switching else Counter()  # by kind
@@ -160,6 +164,7 @@ class Simulator:
 
     def change_scene(self, scene: Scene) -> None:
         """From the next step, `scene`'s effects; time, state and books kept (step size too)."""
+        settle(self)
         carried, was = dict(zip(self.state_names, self.state)), self.books(self.state)
         self._build(scene, self.dynamics.given)
         self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
@@ -180,15 +185,16 @@ class Simulator:
         return self.accuracy.accumulated()
 
     @property
-    def confirmed(self) -> bool:      # the state now found sound: earlier ones are final
-        return self.state is self._sound
-
-    @property
     def holding(self) -> bool:
         """True while the latest step was refused and the state is the last finite one."""
         return self.refused_steps > 0 and self._refused_step == self.steps - 1
 
     def step(self) -> None:
+        """One step: in one compiled call where it can be (compiled/runs.py), else here."""
+        if self.kernel is None or not self.kernel.step(self):
+            self.step_in_python()
+
+    def step_in_python(self) -> None:
         if self.diverged:                 # held until reset: what follows would be nonsense
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
@@ -209,20 +215,18 @@ class Simulator:
                 self._refuse("would make " + ", ".join(
                     f"{n} = {v}" for n, v in zip(self.state_names, y) if not isfinite(v)))
         self.steps += 1
-        if self.steps % guard.CHECK_EVERY == 0 and not self.holding:
+        if not self.holding:
             self._check_divergence()
-        over = self._driver is not None and not self.holding and self._driver(self.state)
-        if over:       # the driver was asked for more than its voltage limit: say so once
-            self.saturated_steps += 1
-            if self.saturated_steps == 1:
-                self._emit("saturation", f"motor driver saturates: {over}")
+        if self._driver is not None and not self.holding:
+            saturation(self)
 
     def _check_divergence(self) -> None:
         """A diverged state (guard.py) gives way to the last sound one, held until reset."""
-        why = guard.divergence(self, self.state)
+        residual = self.residual()
+        why = guard.divergence(self, self.state, residual)
         if why is None:
-            self._sound = self.state
-            if guard.audit(self):              # books that do not close: said once
+            self._sound, self._checked = self.state, (self.state, residual)
+            if guard.audit(self, residual):    # books that do not close: said once
                 self._emit("books", self.books_fault)
         else:                             # the step just counted is refused after all
             self.state, self.diverged = self._sound, why
@@ -278,11 +282,9 @@ class Simulator:
             taken, largest = self.kernel.run(self, left, largest) if fast else (1, largest)
             if not fast:
                 self.step()
-                largest = max(largest, abs(self.residual()))
+                largest = max(largest, abs_residual(self))   # the check's where it made it
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
-        if steps and not self.holding and not self.confirmed:
-            self._check_divergence()          # a short run must not end on nonsense either
         return largest
 
 
@@ -294,7 +296,7 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     sim.dynamics.given[0] = tau1      # under a control loop: its input (sensing/loop.py)
     sim.dynamics.given[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
-    if commanded(sim) != before:
+    if commanded(sim) != before and not (sim.kernel is not None and sim.kernel.commanded(sim)):
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
     if tuple(sim.dynamics.given) != torque and sim.accuracy.shadow is not None:
         sim.accuracy.shadow.answered()        # a controller's answer (shadow.py)
@@ -306,9 +308,27 @@ def commanded(sim: Simulator) -> tuple:
     return (*sim.dynamics.given, *(joint_servo.setpoint if joint_servo is not None else ()))
 
 
+def abs_residual(sim: Simulator) -> float:
+    """|sim.residual()| of the state now: the divergence check's where it made it (a
+    compiled step hands it out; the node books it every tick), else computed."""
+    checked, residual = sim._checked
+    return abs(residual) if checked is sim.state else abs(sim.residual())
+
+
+def saturation(sim: Simulator) -> None:
+    """A driver asked for more than its voltage limit at the state the step ended in:
+    counted, and said once."""
+    over = sim._driver(sim.state)
+    if over:
+        sim.saturated_steps += 1
+        if sim.saturated_steps == 1:
+            sim._emit("saturation", f"motor driver saturates: {over}")
+
+
 def steppers(sim: Simulator, scene: Scene) -> None:
     """What steps the simulator: the switching stepper (friction, limits, clamps: events.py),
     the compiled step and runs (compiled.py, extra `fast`), and the error books."""
+    sim.lowest_energy = guard.lowest_energy(sim)      # where the energy in play starts
     step = compiled.steps_for(sim.dynamics, sim._step)
     sim.sensing = sensing.attach(sim, scene)   # readings and a control loop act between steps
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
@@ -376,10 +396,3 @@ def recorded_row(sim) -> tuple:
     row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     looped = sim.dynamics.command is not sim.dynamics.given
     return row + tuple(sim.dynamics.command) if looped else row
-
-
-def check_divergence(sim: Simulator) -> None:
-    """The divergence check Simulator.run ends with (a run stopped early ends with it too:
-    tools/run/whole_steps.py)."""
-    if not sim.holding:
-        sim._check_divergence()

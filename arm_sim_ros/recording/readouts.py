@@ -59,8 +59,8 @@ def held_by(scene) -> str:
     estimate is off."""
     if scene.estimate == "off":
         return f"estimate off: {NO_ESTIMATE}"
-    if INTEGRATORS[scene.integrator].adaptive:
-        return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
+    if INTEGRATORS[scene.method].adaptive:
+        return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.method})"
     return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))"
             if scene.tolerance else "tolerance 0 (estimate only)")
 
@@ -105,7 +105,7 @@ class Snapshot:
         self.estimates = sim.error_estimate == sim.error_estimate   # NaN: not estimated
         self.held_by = held_by(sim.scene)
         # An embedded pair (dopri5) adapts its own step: it has no sub-steps to count.
-        self.adaptive = INTEGRATORS[sim.scene.integrator].adaptive
+        self.adaptive = INTEGRATORS[sim.scene.method].adaptive
         self._torque = vectorised(dynamics.torque_function) if self.drives else None
         if initial is None:
             scene = sim.scene

@@ -12,6 +12,7 @@ import os
 import sys
 import time
 
+from ..physics.compiled import cache as compile_cache
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..physics.trust.unestimated import ESTIMATES
@@ -21,7 +22,7 @@ from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import (BROKEN_PIPE, DONE, FAULT, REFUSED, STOPPED, ArgumentParser, UsageError,
                      exit_as_main, one_line)
 from .arguments import add_scene_arguments, scene_from_args
-from .run.confirmed import ConfirmedSteps
+from .run.rows import ChunkSteps
 from .progress import Progress
 from .signals import StopOnSignals
 
@@ -61,16 +62,14 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
     telemetry.RerunRecorder.step_batch takes them), else step(sim) after each step.
     Between chunks (about every CHECK_PERIOD s) it reports progress; `stop` (its .requested
     set by a signal) ends the run at the last whole step, even within a step
-    (whole_steps.py): every recorder has then seen the same last step.
-    A step reaches the recorders only once the divergence check has confirmed it; steps it
-    retracts never do (tools/run/confirmed.py). Returns the largest |residual| seen."""
+    (whole_steps.py): every recorder has then seen the same last step. A diverged state
+    never reaches them: every state is checked as it is made (tools/run/rows.py). Returns
+    the largest |residual| seen."""
     from .run.whole_steps import WholeSteps   # the simulator's module: imported with the work
 
     batched = [r for r in recorders if hasattr(r, "step_batch")]
     each = [r.step for r in recorders if not hasattr(r, "step_batch")]
-    # rows are held until the divergence check confirms them (tools/run/confirmed.py)
-    steps = ConfirmedSteps(sim, each, bool(batched),
-                           min((r.books_every for r in batched), default=0))
+    steps = ChunkSteps(each, bool(batched), min((r.books_every for r in batched), default=0))
 
     largest, left, chunk = 0.0, sim.scene.steps_for(duration, sim.step_size), 1
     end = sim.time + duration
@@ -83,7 +82,7 @@ def run_recorded(sim, duration: float, recorders, stop=None, progress=None) -> f
         on_step = steps.on_step if recorders else None
         largest = max(largest, whole.run(count, on_step) if whole is not None
                       else sim.run(count * sim.step_size, on_step))
-        steps.hand_over(batched)
+        steps.hand_over(sim, batched)
         left -= count
         if time.perf_counter() - started < CHECK_PERIOD / 2:   # grow chunks up to the period
             chunk = min(2 * chunk, RUN_BATCH_STEPS if recorders else 64 * RUN_BATCH_STEPS)
@@ -183,7 +182,7 @@ def format_result(scene: Scene, r: dict) -> str:
     others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
               if name not in ("work", "dissipated")]
     return "\n".join([
-        f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.integrator}",
+        f"scene {scene.name}: policy {scene.policy}, h = {scene.step_size:g} s, {scene.method}",
         f"t = {r['t']:.6f} s",
         f"q = {pair(r['q'])} rad",
         f"qd = {pair(r['qd'])} rad/s",
@@ -225,6 +224,9 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv=None) -> int:
+    if sys.stderr.isatty() and not compile_cache.listeners:   # a person waits: say a compile
+        compile_cache.listeners.append(lambda line: print(f"arm-sim: {line}", file=sys.stderr,
+                                                          flush=True))
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)

@@ -1,10 +1,14 @@
 """Signs of life for long work: a tqdm bar on stderr when it is a terminal, a plain line
-every PLAIN_PERIOD seconds otherwise; nothing for work done within QUIET_FOR seconds.
+every PLAIN_PERIOD seconds otherwise; nothing for work done within QUIET_FOR seconds. The
+time left is estimated from the work's own pace: seconds spent compiling kernels (a first
+compile, physics/compiled/cache.py) are left out of it.
 """
 from __future__ import annotations
 
 import sys
 import time
+
+from ..physics.compiled.cache import compile_seconds
 
 QUIET_FOR = 2.0        # wall seconds of work before any progress is shown
 PLAIN_PERIOD = 10.0    # wall seconds between plain lines when stderr is not a terminal
@@ -19,6 +23,7 @@ class Progress:
         self.started = self.last_line = clock()
         self.done = 0.0
         self.bar = None
+        self.compiled = compile_seconds()     # compiling before the work started
 
     def update(self, done: float) -> None:
         self.done = done
@@ -32,15 +37,21 @@ class Progress:
                                 file=self.stream, leave=False, dynamic_ncols=True,
                                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.4g}/{total:.4g} "
                                            "{unit} [{elapsed}<{remaining}]")
+            self.bar.start_t = self.bar._time() - self.working(now)   # tqdm's pace from it
             self.bar.n = done
             self.bar.refresh()
         elif now - self.last_line >= PLAIN_PERIOD:
             self.last_line = now
             fraction = done / self.total
-            left = (now - self.started) * (1 - fraction) / fraction if fraction > 0 else float("inf")
+            left = (self.working(now) * (1 - fraction) / fraction if fraction > 0
+                    else float("inf"))
             print(f"{self.label}: {done:.6g} of {self.total:.6g} {self.unit} "
                   f"({100 * fraction:.1f} %), about {_duration(left)} left",
                   file=self.stream, flush=True)
+
+    def working(self, now: float) -> float:
+        """Seconds of the work itself so far: compiling left out."""
+        return now - self.started - (compile_seconds() - self.compiled)
 
     def close(self) -> None:
         if self.bar is not None:

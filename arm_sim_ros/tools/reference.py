@@ -106,7 +106,8 @@ def preset_rows() -> list:
         named = [key for key in ("damping", "effort_limits", *MAPPINGS, "command_delay")
                  if getattr(scene, key) not in (None, 0.0)]
         rows.append((f"`{name}`", scene.description, ", ".join(named) or "none",
-                     scene.integrator, f"{scene.step_size:g}"))
+                     scene.integrator or f"{scene.method} (none named)",
+                     f"{scene.step_size:g}"))
     return rows
 
 

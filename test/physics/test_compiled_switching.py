@@ -95,11 +95,12 @@ def compiled_simulator(scene):
 
 
 def python_steps(sim, seconds):
-    """The steps of sim.run(seconds) Python takes (Simulator.step), not the compiled run."""
-    taken, step = [], sim.step
-    sim.step = lambda: (taken.append(sim.steps), step())
+    """The steps of sim.run(seconds) Python takes (Simulator.step_in_python), not the
+    compiled run."""
+    taken, step = [], sim.step_in_python
+    sim.step_in_python = lambda: (taken.append(sim.steps), step())
     sim.run(seconds)
-    del sim.step
+    del sim.step_in_python
     return taken
 
 

@@ -60,7 +60,7 @@ def mode_free(sim, steps):
     """The state after `steps` steps of the mode-free right-hand side: MIN/MAX clamps in
     every RK stage (the simulator before clamps were modes; Batch today), by the scene's
     method (rk4, or exponential_rk4 for geared_arm's windings)."""
-    method = INTEGRATORS[sim.scene.integrator]
+    method = INTEGRATORS[sim.scene.method]
     advance = substepping(step_for(method, len(sim.channels), sim.dynamics.decay), sim.substeps)
     y = sim.state
     for _ in range(steps):

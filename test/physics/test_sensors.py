@@ -251,7 +251,11 @@ def test_gravity_compensation_reads_the_readings(controller_model):
     {"damping": 0.3},
     {"motors": {"gear_ratio": [100.0, 50.0], "rotor_inertia": [1.81e-5, 1.81e-5],
                 "resistance": [0.573, 0.573], "inductance": [0.301e-3, 0.301e-3],
-                "torque_constant": [0.0404, 0.0404], "voltage_limit": [10.0, 10.0]}},
+                "torque_constant": [0.0404, 0.0404], "voltage_limit": [10.0, 10.0]},
+     # rk4 named: these windings are stiff at 1 ms, so naming none runs exponential_rk4,
+     # whose books close to 4.3e-6 here with sensors and a delay (1.8e-8 without): left
+     # open, issue 35's note
+     "integrator": "rk4"},
     {"servo": None, "policy": "command_gravity_compensation", "controller_model": {
         "payload_mass": 0.2}},
 ], ids=["servo", "effort_limits", "damping", "voltage_limit", "compensation"])

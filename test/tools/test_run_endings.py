@@ -80,7 +80,8 @@ def test_a_signal_closes_every_output_at_the_same_last_step(tmp_path, signal_nam
 
 # `arm-sim run` with the stability plan's cap on sub-steps raised, so that one step of an
 # engaged compliant limit with damping 1e8 takes minutes (the cap bounds a step to ~2 s on
-# an idle machine); it says on stderr when its stop handler is in.
+# an idle machine); it says on stderr when its stop handler is in, and when the second
+# step starts (the first taken whole, kernels loaded).
 SLOW_STEP_RUN = [sys.executable, "-c", """
 import sys
 from arm_sim_ros.physics.stepping import stability
@@ -91,6 +92,13 @@ def noted(self):
     print("stop handler in", file=sys.stderr, flush=True)
     return enter(self)
 signals.StopOnSignals.__enter__ = noted
+from arm_sim_ros.physics.simulator import Simulator
+step = Simulator.step
+def told(self):
+    if self.steps == 1:
+        print("second step starts", file=sys.stderr, flush=True)
+    step(self)
+Simulator.step = told
 sys.exit(cli.main(sys.argv[1:]))
 """, "run", "--scene", "compliant_limit", "--set", "joint_limits.damping=1e8",
                  "--set", "initial_positions=0.1,1.95", "--set", "initial_velocities=0,3"]
@@ -105,7 +113,7 @@ def test_one_signal_stops_a_step_of_minutes_at_the_last_whole_step(tmp_path, sig
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert process.stderr.readline() == "stop handler in\n"
-        time.sleep(1.0)                             # the free step is taken within that
+        assert process.stderr.readline() == "second step starts\n"
         process.send_signal(getattr(signal, signal_name))
         out, err = process.communicate(timeout=30)  # a hang guard: the step takes minutes
     finally:
@@ -230,29 +238,29 @@ def test_a_step_abandoned_midway_leaves_the_simulator_as_the_step_before_left_it
     and shadow half done), the simulator is put back at the step before: state, books,
     counts and events as those of a run that ended there."""
     from arm_sim_ros.physics.scene import load_scene
-    from arm_sim_ros.physics.simulator import Simulator, check_divergence
+    from arm_sim_ros.physics.simulator import Simulator
     from arm_sim_ros.tools.signals import StopOnSignals
     from arm_sim_ros.tools.run.whole_steps import WholeSteps
 
     scene = load_scene("compliant_limit").replace(initial_positions=(0.1, 1.95),
                                                   initial_velocities=(0.0, 3.0))
     sim, reference = Simulator(scene), Simulator(scene)
-    real, calls, seen = sim.switching.step, [0], []
+    real, calls, seen, at = sim.switching.step, [0], [], []
 
     def sub_step(*args):                  # the switching stepper's integrator step
         calls[0] += 1
-        if calls[0] == 400:               # inside step 90, taken as 131 sub-steps
-            signal.raise_signal(signal.SIGTERM)
+        if calls[0] == 400:               # inside step 90 in pure Python, taken as 131
+            at.append(sim.steps)          # sub-steps (later where steps in one mode are
+            signal.raise_signal(signal.SIGTERM)   # compiled calls)
         return real(*args)
 
     sim.switching.step = sub_step
     with StopOnSignals() as stop:
         WholeSteps(sim, stop).run(300, lambda s: seen.append((s.steps, calls[0])))
     assert stop.requested == "SIGTERM"
-    assert sim.steps == seen[-1][0] == 90 and seen[-1][1] < 400
+    assert sim.steps == seen[-1][0] == at[0] >= 90 and seen[-1][1] < 400
     for _ in range(sim.steps):
         reference.step()
-    check_divergence(reference)
     assert sim.state == reference.state and sim.substeps_taken == reference.substeps_taken
     assert sim.error_estimate == reference.error_estimate
     assert sim.accumulated_error == reference.accumulated_error

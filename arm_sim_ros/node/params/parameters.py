@@ -12,7 +12,8 @@ from ...physics.effects import EffortLimits
 from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
 from ...physics.model import ParameterError, brief
-from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError, load_scene
+from ...physics.scene import (FIELD_KINDS, MAPPINGS, UNNAMED, Scene, SceneError,
+                              load_scene)
 from .recording_targets import rerun_path_problem, viewer_address_problem
 from .values import ParameterRefused, coerce
 
@@ -129,7 +130,8 @@ PARAMETERS = (
     _scene_spec("link_masses", "float_pair", "[m1, m2] kg"),
     _scene_spec("com_distances", "float_pair", "[r1, r2] m, joint to centre of mass"),
     _scene_spec("com_inertias", "float_pair", "[I1, I2] kg m^2 about each centre of mass"),
-    _scene_spec("integrator", "str", "Runge-Kutta method (rk4 default)"),
+    _scene_spec("integrator", "str", "Runge-Kutta method (\"\": none named, the default: "
+                f"{UNNAMED})"),
     _scene_spec("rtol", "float", "relative error tolerance of integrator dopri5"),
     _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
     _scene_spec("tolerance", "float", "local error per simulated second a fixed step may "

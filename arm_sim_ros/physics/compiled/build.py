@@ -15,7 +15,8 @@ its steps in which nothing can switch (switch_kernel.py, switch_run.py).
 The same operations in the same order, on IEEE doubles without fast-math, with cos, sin
 and exp from the same libm: the states are the pure-Python path's bit for bit
 (test_compiled.py). numba caches the machine code next to the module file
-(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine.
+(ARM_SIM_CACHE, default ~/.cache/arm_sim_ros): a scene compiles once per machine, shared by
+every checkout and venv (cache.py).
 Without numba (or with ARM_SIM_COMPILED=0) nothing here is used.
 """
 from __future__ import annotations
@@ -30,6 +31,7 @@ from functools import lru_cache, partial
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
+from . import cache
 from ..stepping import integrators
 from .kernels import KERNELS
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
@@ -40,6 +42,9 @@ try:              # in the default install where numba has a wheel (scripts/venv
 except Exception as error:   # absent, or installed and broken (an llvmlite without its library)
     numba, MISSING = None, f"{type(error).__name__}: {error}"
 _say_once = lru_cache(maxsize=None)(partial(print, file=sys.stderr))   # a line, once a process
+if numba is not None:     # a first compile says so, and is timed (cache.py)
+    from numba.core import event as numba_event
+    cache.watch(numba_event)
 
 # Energy each effect stores (effects' stored_energy, the same operations in the same order:
 # squares as products, since Python's x ** 2 is libm's pow, 1 ulp off numba's x * x in about

@@ -5,11 +5,12 @@ the state's entries and the books' constants and compiles them with numba.
 run_books does what Simulator.step does on a smooth scene, step after step, with the same
 operations in the same order: the planned sub-steps, the shadow beside them (shadow.py),
 the accuracy books' checks on their schedule (accuracy.py: the step doubled, a miss of the
-tolerance taken again, the controller's count, the next check), the divergence check every
-CHECK_EVERY steps and at the run's end (guard.py). Python's max(a, b) keeps a unless b > a:
-so does `bigger`. Where Python would say something (a new highest count, a tolerance out
-of reach, a lost estimate, a fault, a divergence) it stops and leaves that step to Python
-(code 1: not taken; code 2: taken, its divergence check not done).
+tolerance taken again, the controller's count, the next check), the divergence check of
+every state and the energy in play's peak every CHECK_EVERY steps (guard.py). Python's
+max(a, b) keeps a unless b > a: so does `bigger`. Where Python would say something (a new
+highest count, a tolerance out of reach, a lost estimate, a fault, a divergence) it stops
+and leaves that step to Python (code 1: not taken; code 2: taken, its divergence check
+Python's, the state before it in S).
 """
 
 RUN = '''
@@ -24,7 +25,7 @@ def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
     factor, lowest, orderf, stiff_below = F[12], F[13], F[14], F[15]
     state = ({items},)
     shade = ({zitems},)
-    done, code, sound = 0, 0, -1
+    done, code = 0, 0
     while done < left:
 CHECK
         new_every, wanted, count = every, n, n     # count: this step's sub-steps
@@ -58,22 +59,19 @@ SHADOW
                 O[k] = new[k] - z[k]
             zvalid, shade = 1, now_shade
         lost, far = now_lost, now_far
-        state = new
+        before, state = state, new
         steps += 1
         done += 1
-        if steps % {CHECK_EVERY!r} == 0:      # guard.divergence and guard.audit
-            ok, in_play = audited(state, S, C, E0, R0, R1, lowest, in_play, fault)
-            if not ok:
-                code = 2
-                break
-            sound = steps
-        largest = bigger(largest, abs(residual(state, C, E0, R0, R1)))
-    if code == 0 and done == left and steps % {CHECK_EVERY!r} != 0:
-        ok, in_play = audited(state, S, C, E0, R0, R1, lowest, in_play, fault)
-        if ok:                                # Simulator.run's check at its end
-            sound = steps
-        else:
+        r = residual(state, C, E0, R0, R1)    # guard.divergence and guard.audit
+        ok, in_play = audited(state, r, C, E0, R0, lowest, in_play, fault,
+                              steps % {CHECK_EVERY!r} == 0)
+        if not ok:
+            for k in range({width}):
+                S[k] = before[k]
             code = 2
+            break
+        largest = bigger(largest, abs(r))
+    sound = steps if code != 2 else steps - 1
     handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
            largest, far, in_play, estimate, previous)
     return done, code, sound
@@ -98,7 +96,8 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
     and written back; runs.Kernel names them), the shadow's state z, its local error L
     and offset O; G scratch, S the state the latest divergence check found sound.
     (steps taken, code: 0 all taken, 1 the next step is Python's, 2 the last step's
-    divergence check is Python's; the step of the latest sound check or -1).''',
+    divergence check is Python's, the state before it in S; the step of the latest state
+    found sound).''',
     CHECK='''        check = steps >= due''',
     PLAIN='''            new = substepped(state, h, n, K)
             if not finite(new):
@@ -302,19 +301,17 @@ def handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, 
 
 
 @njit(cache=True)
-def audited(state, S, C, E0, R0, R1, lowest, in_play, fault):
-    """guard.divergence and guard.audit: (sound and the books close, the energy in play),
-    the sound state kept in S; False: Python's to say."""
-    r = residual(state, C, E0, R0, R1)
+def audited(state, r, C, E0, R0, lowest, in_play, fault, peak):
+    """guard.divergence and guard.audit of a state whose residual is r (`peak`: the energy
+    in play keeps its peak): (sound and the books close, the energy in play); False:
+    Python's to say."""
     expected = E0 - lowest + abs(inputs(state, R0))
     if not abs(r) <= {FLOOR!r} + bigger(in_play, expected) or not bigger(
             abs(state[0]), abs(state[1])) <= {MAX_ANGLE!r}:
         return False, in_play
-    play = bigger(in_play, energy(state, C) - lowest)
+    play = bigger(in_play, energy(state, C) - lowest) if peak else in_play
     if fault == 0 and not abs(r) <= {BOOKS_FRACTION!r} * ({FLOOR!r} + bigger(play, expected)):
         return False, in_play
-    for k in range({width}):
-        S[k] = state[k]
     return True, play
 
 

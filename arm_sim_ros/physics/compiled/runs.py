@@ -1,21 +1,25 @@
-"""A simulator's compiled runs: Kernel (kernels.run_books from the simulator's state and
-books, and back into them) and Steps (the step compiled for each right-hand side met), from
-the modules build.py writes and loads.
+"""A simulator's compiled steps and runs: Kernel (Simulator.step and Simulator.run in
+compiled calls, the books held in arrays between them) and Steps (the step compiled for each
+right-hand side met), from the modules build.py writes and loads.
 """
 from __future__ import annotations
 
+from math import isfinite
+
 from ..stepping.stability import MAX_SUBSTEPS
-from ..trust import accuracy, guard
-from ..trust.controller import SAFETY
+from ..trust import accuracy
 from ..trust.unestimated import Off
 from .build import compilable, constants_of, energy_source, load, module_source
-
-NEVER = 2 ** 62           # the step index of a check that never comes (estimate off)
+from .held import pack, unpack
 
 
 class Kernel:
-    """A simulator's compiled Simulator.run (kernels.run_books: its steps, the shadow, the
-    error books' checks and the divergence checks in one call) and its compiled residual."""
+    """A simulator's compiled Simulator.step and Simulator.run: the step, the shadow, the
+    error books' checks and schedule and the divergence check in one call (kernels.run_books;
+    a switching scene's run_switching in its current mode, switch_run.py), handing back to
+    Python only where Python must speak; and its compiled residual. Between calls the books
+    stay in the arrays (`held`, held.py): packing them costs more than the step, so they go
+    back into Python's objects only when Python reads them or takes a step (settle)."""
 
     path = "compiled (numba)"
 
@@ -31,97 +35,107 @@ class Kernel:
                                       **getattr(step, "constants", {})})
         self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
         width = 4 + len(dynamics.extra) + len(dynamics.channels)
-        self.y, self.z, self.L, self.O, self.G, self.S, self.D = (np.zeros(width)
-                                                                  for _ in range(7))
+        self.y, self.z, self.L, self.O, self.G, self.S, self.D, self.r = (
+            np.zeros(width) for _ in range(8))      # r: the residual's, apart from the run's
         self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(16)
-        self.command, self.lowest = dynamics.command, None
+        self.command = dynamics.command
         self.switched = None      # a switching scene's runs in one mode (switch_run.py)
+        self.held = None          # (run, K, more, books) whose books the arrays hold
+        self.last = None          # the state the latest compiled call handed out
+        self.sound = -1           # the step of the latest state it found sound
+
+    def step(self, sim) -> bool:
+        """Simulator.step in one compiled call; False where Python must take the step."""
+        if (self.held is None or sim.state is not self.last) and not self.hold(sim):
+            return False
+        run, K, more, _ = self.held
+        K[0], K[1] = self.command
+        self.F[4] = 0.0
+        done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
+                                     self.F, K, self.C, 1, *more)
+        if not done:
+            self.settle(sim)
+            return False
+        sim.state = self.last = tuple(self.y.tolist())
+        sim.steps += 1
+        if code == 2:                     # its divergence check is Python's
+            self.settle(sim)
+            sim._check_divergence()
+        else:
+            sim._checked = (sim.state, float(self.F[4]))   # its |residual|
+        return True
 
     def run(self, sim, left: int, largest: float):
         """(steps taken, largest |residual|) of Simulator.run without a callback: steps in
         one compiled call while nothing is to be said; the step Python must take (a switch,
         a driver, a new highest count, a fault ...) as Simulator.step, its residual
         compiled."""
-        books, done, code = sim.accuracy, 0, 1
-        if self.plain and not sim.diverged and smooth(books):
-            done, largest, code = self.books_run(sim, books, left, largest)
-        elif self.switched is not None:   # a switching scene's steps in one mode
-            done, largest, code = self.switched.run(self, sim, left, largest)
+        if (self.held is None or sim.state is not self.last) and not self.hold(sim):
+            sim.step_in_python()
+            return 1, max(largest, abs(self.residual(sim)))
+        run, K, more, _ = self.held
+        K[0], K[1] = self.command
+        self.F[4] = largest
+        done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
+                                     self.F, K, self.C, left, *more)
+        if done:
+            sim.state = self.last = tuple(self.y.tolist())
+            sim.steps, largest = int(self.I[0]), float(self.F[4])
         if code == 2:                     # its divergence check is Python's
+            self.settle(sim)
             sim._check_divergence()
             largest = max(largest, abs(self.residual(sim)))
         if code != 1 or done == left:
             return done, largest
-        sim.step()
+        self.settle(sim)
+        sim.step_in_python()
         return done + 1, max(largest, abs(self.residual(sim)))
 
+    def hold(self, sim) -> bool:
+        """The simulator's books into the arrays for the compiled run of its next steps;
+        False where the next step is Python's."""
+        self.settle(sim)
+        books = sim.accuracy
+        if sim.diverged:
+            return False
+        if self.plain and smooth(books):
+            run = (self.module.run_books, self.K, ())
+        elif self.switched is None or (run := self.switched.ready(self, sim, books)) is None:
+            return False
+        pack(self, sim, books)
+        self.held, self.last, self.sound = (*run, books), sim.state, sim.steps
+        return True
+
+    def settle(self, sim) -> None:
+        """The books the arrays hold back into Python's objects (nothing when none)."""
+        if self.held is None:
+            return
+        run, _, _, books = self.held
+        self.held = None
+        unpack(self, sim, books, self.sound)
+        if run is not self.module.run_books:
+            self.switched.landed(self, sim, books)
+
+    def drop(self) -> None:
+        """Forget the books the arrays hold (Python's objects were put back: WholeSteps)."""
+        self.held = None
+
+    def commanded(self, sim) -> bool:
+        """A new command while the books are held: the next step is checked, as
+        set_command does (True); a switching scene's books are settled, its clamps' modes
+        being Python's to find again (False)."""
+        if self.held is None:
+            return False
+        if self.held[0] is not self.module.run_books:
+            self.settle(sim)
+            return False
+        if not isinstance(self.held[3], Off):
+            self.I[1] = min(int(self.I[1]), int(self.I[0]))
+        return True
+
     def residual(self, sim) -> float:
-        self.y[:] = sim.state
-        return self.module.residual(self.y, self.C, sim.initial_energy, *sim.retired)
-
-    def books_run(self, sim, books, left: int, largest: float, run=None, K=None, more=()):
-        """kernels.run_books (or `run`, reading K and `more`) from the simulator's state
-        and books, and back into them."""
-        I, F, h = self.I, self.F, sim.step_size
-        run, K = run or self.module.run_books, self.K if K is None else K
-        K[0], K[1] = self.command
-        self.y[:] = sim.state
-        if self.lowest is None:
-            self.lowest = guard.lowest_energy(sim)
-        if isinstance(books, Off):        # the steps alone: no check is ever due
-            n = books.substeps
-            I[:] = (sim.steps, NEVER, sim.steps, 0, n, 1, n, n, n, n, 1, 4, 4, 0, 0, 0, 1,
-                    sim.books_fault is not None)
-            F[:] = (h, sim.initial_energy, *sim.retired, largest, 0.0, sim.energy_in_play,
-                    books.error_estimate, 1.0, 0.0, 1.0, 1.0, 1.0, self.lowest, 4.0, 0.0)
-            done, code, sound = run(self.y, self.z, self.L, self.O, self.G, self.S, I, F, K,
-                                    self.C, left, *more)
-            return self.landed(sim, done, code, sound, largest)
-        shadow, n = books.shadow, books.states
-        known = shadow.local is not None
-        followed = known and not shadow.lost and sim.state is shadow.last
-        if known:
-            self.L[:n] = shadow.local
-        if followed:
-            self.z[:] = shadow.shadow
-        self.O[:n] = shadow.offset or [0.0] * n
-        I[:] = (sim.steps, books.due, books.since, books.booked_taken, books.substeps,
-                books.every, books.free.floor, books.free.cap, books.cap, books.most,
-                books.capped, n, books.order, known, followed, shadow.lost,
-                books.said_lost or books.emit is None, sim.books_fault is not None)
-        F[:] = (h, sim.initial_energy, *sim.retired, largest, shadow.largest,
-                sim.energy_in_play, books.error_estimate, books.free.previous, books.tolerance,
-                SAFETY * books.target(h), books.target(h), books.factor, self.lowest,
-                float(books.order), books.stiff_below)
-        done, code, sound = run(self.y, self.z, self.L, self.O, self.G, self.S, I, F, K,
-                                self.C, left, *more)
-        if not done:
-            return 0, largest, code
-        books.due, books.since, books.booked_taken = (int(v) for v in I[1:4])
-        if int(I[4]) != books.substeps:
-            books.use(int(I[4]))
-        books.every = int(I[5])
-        books.error_estimate, books.free.previous = float(F[7]), float(F[8])
-        if I[13]:
-            shadow.local = self.L[:n].tolist()
-        if I[14]:
-            shadow.shadow, shadow.offset = tuple(self.z.tolist()), self.O[:n].tolist()
-        shadow.largest, shadow.lost = float(F[5]), bool(I[15])
-        taken = self.landed(sim, done, code, sound, largest)
-        if I[14]:
-            shadow.last = sim.state
-        return taken
-
-    def landed(self, sim, done: int, code: int, sound: int, largest: float):
-        """The run's state, step count, energy in play and latest sound state into the
-        simulator: (steps taken, largest |residual|, code)."""
-        if not done:
-            return 0, largest, code
-        sim.state = tuple(self.y.tolist())
-        sim.steps, sim.energy_in_play = int(self.I[0]), float(self.F[6])
-        if sound >= 0:
-            sim._sound = sim.state if sound == sim.steps else tuple(self.S.tolist())
-        return done, float(self.F[4]), code
+        self.r[:] = sim.state
+        return self.module.residual(self.r, self.C, sim.initial_energy, *sim.retired)
 
 
 class Steps:
@@ -146,7 +160,13 @@ class Steps:
         step, K = known
         K[0], K[1] = self.command
         self.y[:] = y
-        return step(self.y, h, K)
+        new = step(self.y, h, K)
+        total = sum(new)
+        if total - total == 0.0 or all(isfinite(v) for v in new):   # inf - inf, NaN: NaN
+            return new
+        # left the doubles: Python's step, the same numbers, says how (an exception where
+        # Python's cos(inf) raises, where numba's makes NaN), as on the pure-Python path
+        return self.python(f, tuple(y), h)
 
     def compile(self, f):
         """(step_array, K) of the module of rhs f; a function without source: Python's."""

@@ -30,49 +30,43 @@ class Switched:
         self.steps, self.driven = steps, driven
         self.X, self.E = np.zeros(4), np.zeros(8)
 
-    def run(self, kernel, sim, left: int, largest: float):
-        """(steps taken, largest |residual|, code) as runs.Kernel.books_run: code 1,
-        with no step taken, where Python must take the next step."""
-        books, stepper = sim.accuracy, sim.switching
-        compiled = self.ready(sim, books, stepper)
-        if compiled is None:
-            return 0, largest, 1
-        module, K = compiled
-        friction, mode, off = stepper.friction, stepper.mode, isinstance(books, Off)
-        edge = STEEP * (friction.stribeck_velocity or 0.0) if friction is not None else 0.0
-        steep = edge > 0.0 and not off           # a sliding joint in Stribeck's dip: checked
-        self.X[:] = (steep and mode[0] in ("+", "-"), steep and mode[1] in ("+", "-"), edge,
-                     self.driven)
-        since = getattr(books, "since", 0)
-        done, largest, code = kernel.books_run(sim, books, left, largest, module.run_switching,
-                                               K, (self.X, self.E, kernel.D))
-        if done:
-            stepper.last = sim.state             # the mode goes on from here
-            if off:
-                return done, largest, code
-            if books.shadow.last is sim.state:
-                books.twin.last = books.shadow.shadow
-            if books.since != since and books.tolerance:
-                books.tried = {}                 # accuracy.more: a check that met the tolerance
-        return done, largest, code
-
-    def ready(self, sim, books, stepper):
-        """(the current mode's module, its K), or None where the next step is Python's."""
+    def ready(self, kernel, sim, books):
+        """(the current mode's run_switching, its K, the arrays it takes besides), or None
+        where the next step is Python's."""
+        stepper = sim.switching
         if sim.diverged or sim.sampled is not None or not isinstance(
                 books, (accuracy.Accuracy, Off)) or books.stepper is not stepper or \
                 stepper.last is not sim.state:
             return None
-        mode = stepper.mode
+        mode, off = stepper.mode, isinstance(books, Off)
         if mode[2] or mode[3] or stale(stepper) or books.substeps != stepper.substeps:
             return None
-        if not isinstance(books, Off) and not self.followed(sim, books, mode):
+        if not off and not self.followed(sim, books, mode):
             return None
         rhs, _, _, kinds, _ = stepper.functions(mode)
         if not kinds or not getattr(rhs, "guards_source", ""):
             return None
         module, K = self.steps.module(rhs)
-        return None if module is None else (module, K)
+        if module is None:
+            return None
+        friction = stepper.friction
+        edge = STEEP * (friction.stribeck_velocity or 0.0) if friction is not None else 0.0
+        steep = edge > 0.0 and not off           # a sliding joint in Stribeck's dip: checked
+        self.X[:] = (steep and mode[0] in ("+", "-"), steep and mode[1] in ("+", "-"), edge,
+                     self.driven)
+        self.since = getattr(books, "since", 0)
+        return module.run_switching, K, (self.X, self.E, kernel.D)
 
+    def landed(self, kernel, sim, books) -> None:
+        """After compiled steps in one mode (runs.Kernel.settle): the mode goes on from the
+        state they ended in, and so does the shadow's twin."""
+        sim.switching.last = kernel.last
+        if isinstance(books, Off):
+            return
+        if books.shadow.last is kernel.last:
+            books.twin.last = books.shadow.shadow
+        if books.since != self.since and books.tolerance:
+            books.tried = {}                 # accuracy.more: a check that met the tolerance
 
     @staticmethod
     def followed(sim, books, mode) -> bool:

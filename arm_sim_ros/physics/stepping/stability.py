@@ -24,7 +24,8 @@ from fractions import Fraction
 from functools import lru_cache
 from math import ceil, cos, hypot, pi, sin
 
-from .integrators import RK4, ButcherTableau, exponential_rk4, integrates_decay_exactly
+from .integrators import (EXPONENTIAL_RK4, INTEGRATORS, RK4, ButcherTableau, exponential_rk4,
+                          integrates_decay_exactly)
 from ..model import ArmParameters, StepRefused, mass_matrix
 
 # Sub-steps aim at this fraction of the limit, d h_sub Lambda = 1.0: there R(-1) = 0.375 is
@@ -228,13 +229,37 @@ def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
     Damping alone has real eigenvalues (the real-axis limit); springs and windings
     oscillate, so their bound |lambda| is kept inside the half-disk. An adaptive method
     controls its own error and sub-steps by itself."""
-    exact = integrates_decay_exactly(tableau)
-    ratio, limit, what = bound(tableau, effects, arm, h, exact)
-    substeps = 1 if getattr(tableau, "adaptive", False) else max(
-        substeps_needed(ratio, limit), exact_substeps(effects, arm, h) if exact else 1)
+    ratio, limit, substeps, what = planned(tableau, effects, arm, h)
     message = None
     if substeps > 1:
         stiff = stiff_names(effects, arm)
         message = (f"{what} = {ratio:.4g} ({stiff}) exceeds {tableau.name}'s stability limit "
                    f"{limit:.4g}: each {h:g} s step is taken as {substeps} sub-steps")
+        unstiff = [t.name for t in INTEGRATORS.values() if t.order >= tableau.order
+                   and not t.adaptive and planned(t, effects, arm, h)[2] == 1]
+        if unstiff:
+            message += f"; {' or '.join(unstiff)} would take none (integrator: {unstiff[0]})"
     return ratio, limit, substeps, message
+
+
+def planned(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
+    """(ratio, limit, sub-steps, what is bounded) of plan, said to no one."""
+    exact = integrates_decay_exactly(tableau)
+    ratio, limit, what = bound(tableau, effects, arm, h, exact)
+    substeps = 1 if getattr(tableau, "adaptive", False) else max(
+        substeps_needed(ratio, limit), exact_substeps(effects, arm, h) if exact else 1)
+    return ratio, limit, substeps, what
+
+
+UNNAMED = "rk4, or exponential_rk4 where motor windings are stiff"   # integrator "" takes
+
+
+def unstiff_method(effects, arm: ArmParameters, h: float) -> str:
+    """The integrator of a scene that names none: exponential_rk4 where it takes fewer
+    stability sub-steps than rk4 (motor windings stiff at this step: it integrates their
+    decay exactly), else rk4 (the same bits where there are no windings)."""
+    if any(getattr(e, "linear_decay", tuple)() for e in effects):
+        taken = planned(RK4, effects, arm, h)[2]
+        if taken > 1 and planned(EXPONENTIAL_RK4, effects, arm, h)[2] < taken:
+            return EXPONENTIAL_RK4.name
+    return RK4.name

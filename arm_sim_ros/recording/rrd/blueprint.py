@@ -332,7 +332,7 @@ def effects_document(snap) -> str:
     """The effects the scene called for, with their parameters in units, and its books."""
     scene = snap.scene
     about = f": {scene.description}" if scene.description else ""
-    lines = [f"**{scene.name}**{about} ({scene.integrator}, h = {scene.step_size:g} s)", "",
+    lines = [f"**{scene.name}**{about} ({scene.method}, h = {scene.step_size:g} s)", "",
              "| effect | parameter | value | unit |", "|---|---|---|---|"]
     for effect in snap.effects:
         rows = effect_rows(snap, effect) or [("", "", "")]

@@ -40,7 +40,7 @@ def scene_values(scene) -> dict:
 
 
 def integrator_values(sim) -> dict:
-    tableau = INTEGRATORS[sim.scene.integrator]
+    tableau = INTEGRATORS[sim.scene.method]
     values = {"name": tableau.name, "order": tableau.order, "stages": len(tableau.c),
               "c": [float(v) for v in tableau.c], "b": [float(v) for v in tableau.b],
               "a": json.dumps([list(map(float, row)) for row in tableau.a]),

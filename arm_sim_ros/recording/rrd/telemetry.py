@@ -122,16 +122,16 @@ class RerunRecorder:
         """After a physics step: keep its state and its error books (see step_batch)."""
         self.step_batch(sim, (recorded_row(sim),))
 
-    def step_batch(self, sim, states, books=(), last=None) -> None:
-        """After len(states) physics steps: their states in order, the last being sim.state
-        (or step `last`'s: rows before a retracted stretch), taken under the command sim
+    def step_batch(self, sim, states, books=()) -> None:
+        """After len(states) physics steps: their states in order, the last being sim.state,
+        taken under the command sim
         holds now (the node hands its steps over before a new command). The node calls this
         every 10 steps, `arm-sim run` every 1000; the states are copied, so the caller may
         reuse the list; `books`: the error books of every books_every-th step among them
         (module docstring). Nothing else happens (see flush)."""
         if sim is not self.sim or sim.dynamics is not self._dynamics:
             self._bind(sim)
-        n, end = len(states), sim.steps if last is None else last   # last: a retraction after
+        n, end = len(states), sim.steps
         if n == 0:
             return
         snap = self._snapshot     # None: it could not be made, and telemetry is off
@@ -139,7 +139,7 @@ class RerunRecorder:
                     tuple(sim.dynamics.command) if snap and snap.commanded else None, n)
         self._next = end + 1
         self._states.fromlist(list(chain.from_iterable(states)))   # the fastest way in
-        self._books.fromlist(with_last(books, sim) if last is None else list(books))
+        self._books.fromlist(with_last(books, sim))
         self._waiting += n
         if self._waiting >= self._check_at:
             self.flush()
@@ -349,7 +349,7 @@ def start_line(sim) -> str:
                 else ", no error estimate: the simulator does not estimate these steps")
     return (f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
             f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "
-            f"{sim.scene.integrator}, {held_by(sim.scene)}{estimate}, "
+            f"{sim.scene.method}, {held_by(sim.scene)}{estimate}, "
             f"E0 = {sim.initial_energy:.9g} J")
 
 

@@ -211,11 +211,11 @@ def simulator_run(sim: Simulator, scene: Scene, samples, ref, residual: float, s
                   kind: str, held=False) -> Run:
     """The Run of a simulator's samples of `scene`."""
     state_error, drift = errors(sim, samples, ref)
-    adaptive = INTEGRATORS[scene.integrator].adaptive
+    adaptive = INTEGRATORS[scene.method].adaptive
     tolerance = scene.rtol if adaptive else None if kind == "method" else scene.tolerance
-    return Run(scene.integrator, scene.step_size, tolerance, state_error, drift,
+    return Run(scene.method, scene.step_size, tolerance, state_error, drift,
                float("inf") if held else residual, series=series_of(
-                   scene.integrator, kind, scene.estimate),
+                   scene.method, kind, scene.estimate),
                substeps=substeps, kind=kind, path=sim.path, estimate=scene.estimate)
 
 

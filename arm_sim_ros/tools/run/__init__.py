@@ -1,2 +1,2 @@
-"""`arm-sim run`'s outputs: rows held until confirmed, steps a stop may abandon, the bag
+"""`arm-sim run`'s outputs: the steps its recorders take, steps a stop may abandon, the bag
 of an offline run. May import: physics, recording, node, tools.signals."""

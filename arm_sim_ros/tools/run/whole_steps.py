@@ -15,7 +15,7 @@ from __future__ import annotations
 from copy import deepcopy
 from time import perf_counter
 
-from ...physics.simulator import check_divergence
+from ...physics.simulator import abs_residual, settle
 from ..signals import StepInterrupted
 
 KEEP_PERIOD = 0.05        # wall seconds between copies: bounds the steps taken again
@@ -32,12 +32,12 @@ class WholeSteps:
         self._kept, self._kept_at = None, 0.0
 
     def run(self, steps: int, on_step=None) -> float:
-        """Up to `steps` steps, on_step(sim) after each (never interrupted), then the
-        divergence check Simulator.run ends with. Returns the largest |residual| seen."""
+        """Up to `steps` steps, on_step(sim) after each (never interrupted), as Simulator.run
+        takes them. Returns the largest |residual| seen."""
         sim, stop = self.sim, self.stop
-        first = whole = sim.steps
+        whole = sim.steps
         largest = 0.0
-        self.keep()       # each run ends with a check: never taken again across one
+        self.keep()       # a copy at each run's start: never taken again across one
         try:
             for _ in range(steps):
                 if stop.requested:
@@ -49,14 +49,12 @@ class WholeSteps:
                     sim.step()
                 finally:
                     stop.within_step = False
-                largest = max(largest, abs(sim.residual()))
+                largest = max(largest, abs_residual(sim))
                 if on_step is not None:
                     on_step(sim)
                 whole = sim.steps
         except StepInterrupted:
             self.undo(whole)
-        if sim.steps > first:
-            check_divergence(sim)
         return largest
 
     def keep(self) -> None:
@@ -64,6 +62,7 @@ class WholeSteps:
         simulator itself, as the books' callbacks hold it, its dynamics, scene, arm) is
         shared, not copied."""
         sim = self.sim
+        settle(sim)        # the books a compiled kernel holds, into the objects copied
         memo = {id(fixed): fixed for fixed in (sim, sim.dynamics, sim.scene, sim.arm)}
         self._kept = deepcopy({k: v for k, v in vars(sim).items() if k not in OWN}, memo)
         self._kept_at = perf_counter()
@@ -73,6 +72,7 @@ class WholeSteps:
         sim = self.sim
         listeners = sim.event_listeners
         vars(sim).update(self._kept)
+        settle(sim, keep=False)          # a compiled kernel's books are of the later steps
         self.keep()                      # the copy again: a later undo starts from it too
         sim.event_listeners = []
         try:
