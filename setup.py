@@ -25,7 +25,7 @@ setup(
         share("urdf", "*.xml"),
         share("rviz", "*.rviz"),
     ],
-    python_requires=">=3.10",
+    python_requires=">=3.11",
     # Pinned: what CI and the README install. On a ROS machine rosdep supplies numpy/yaml.
     install_requires=[
         "numpy==2.4.6",

@@ -218,10 +218,13 @@ class ArmSimCore(CommandInput):
 
 
 def started(config: NodeConfig) -> str:
-    """The start line; with a robot_description, every scene value the URDF replaced."""
+    """The start line: the recording's file, if any (scripts/run names a new one each run);
+    with a robot_description, every scene value the URDF replaced."""
     scene, values = config.scene, config.values
     text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
             f"{config.steps_per_tick} steps per tick")
+    if values["rerun_path"]:
+        text += f"; recording {values['rerun_path']}"
     if values["robot_description"]:
         base = load_scene(values["scene"])
         changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))
