@@ -5,6 +5,7 @@ Every layer may raise `UsageError`; the front ends (`arm-sim`, `arm_sim_node`) p
 from __future__ import annotations
 
 import argparse
+import difflib
 import unicodedata
 
 # Exit codes of `arm-sim` and `arm_sim_node`, in one place (docs/reference/exit_codes.md).
@@ -13,7 +14,7 @@ EXIT_CODES = {
     DONE: "done (the node: also stopped by SIGINT or SIGTERM)",
     FAULT: "the work failed: `arm-sim run` faulted (a step was refused: `fault` and "
            "`refused_steps` in `--json`), `arm-sim fit` did not converge, `arm-sim send-torque` "
-           "found no subscriber",
+           "found no subscriber, `arm-sim record` received no message (no bag is left)",
     REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "
              "or half-written",
     STOPPED: "`arm-sim` stopped by SIGINT, SIGTERM or SIGHUP; every output is closed at the "
@@ -38,3 +39,10 @@ def one_line(message) -> str:
     value (a newline, a carriage return...) are shown escaped, never acted on."""
     return "".join(repr(c)[1:-1] if unicodedata.category(c).startswith("C") else c
                    for c in str(message))
+
+
+def did_you_mean(word: str, choices) -> str:
+    """`did you mean 'x'? ` for the choice closest to a misspelt `word` (a '-' for a '_'
+    too), or "" when none is close."""
+    close = difflib.get_close_matches(word.replace("-", "_"), list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""

@@ -13,7 +13,7 @@ from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
 from ...physics.model import BRIEF, ParameterError, brief
 from .recording_targets import rerun_path_problem, viewer_address_problem
-from ...usage import one_line
+from ...usage import did_you_mean, one_line
 from ...physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
@@ -291,7 +291,8 @@ def check_recording(values: dict, names=RECORDING) -> None:
 def _check_known(names) -> None:
     unknown = sorted(set(names) - set(SPECS))
     if unknown:
-        raise ParameterRefused(unknown[0], f"unknown parameter; known: {', '.join(SPECS)}")
+        raise ParameterRefused(unknown[0], f"unknown parameter; {did_you_mean(unknown[0], SPECS)}"
+                                           f"known: {', '.join(SPECS)}")
 
 
 def scene_defaults(scene_name: str, robot_description: str = "") -> dict:
