@@ -67,12 +67,15 @@ class ArmSimCore(CommandInput):
                                  self.late_ticks)
 
     def _on_sim_event(self, event) -> None:
-        """What the simulator does later reaches the log as it happens (a fault: _advance)."""
+        """What the simulator does later reaches the log as it happens, at the event's level
+        (a fault: _advance); warnings rate-limited by kind."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ("switch", "books"):   # stick, slip...: physics; books off: an error
-            (self.log.info if event.kind == "switch" else self.log.error)(text)
-        elif event.kind != "fault":
+        if event.kind == "fault":
+            return
+        if event.level == "warning":
             self.warnings.warning(event.kind, text)
+        else:
+            (self.log.info if event.level == "info" else self.log.error)(text)
 
     def set_parameters(self, changes: dict) -> list:
         """Runtime parameter changes as one transaction (rebuild.py): the new physics built

@@ -30,14 +30,27 @@ from .compiled.switch_run import Switched
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
 
 
+# How loud each kind of event is, for every listener (the node's log, a recording's text
+# log, arm-sim run): what the physics does by design is information (a switch, the
+# tolerance taking more sub-steps, a chaotic motion becoming unpredictable); what costs
+# accuracy or time is a warning (substepping, accuracy, saturation, servo); a refused step
+# or broken books an error.
+LEVELS = {"switch": "info", "tolerance": "info", "unpredictable": "info",
+          "books": "error", "fault": "error"}
+
+
 @dataclass(frozen=True)
 class Event:
     """Something the simulator did that a person should hear about (kind: substepping,
-    fault, saturation)."""
+    tolerance, unpredictable, accuracy, fault, saturation...), at its LEVELS level."""
 
     t: float
     kind: str
     message: str
+
+    @property
+    def level(self) -> str:
+        return LEVELS.get(self.kind, "warning")
 
 
 @dataclass(frozen=True)

@@ -173,7 +173,7 @@ class RerunRecorder:
 
     def _on_sim_event(self, event) -> None:
         """At the step it came in (event.t: its start), though its states come later."""
-        self.event(f"{event.kind}: {event.message}", "error" if event.kind == "fault" else "warn",
+        self.event(f"{event.kind}: {event.message}", event.level,
                    round(event.t / self.sim.step_size) + 1 - self._next)
 
     def event(self, text: str, level: str = "info", ahead: int = 0) -> None:
