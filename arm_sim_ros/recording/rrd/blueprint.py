@@ -13,6 +13,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ...physics.effects import MAPPING_EFFECTS, EffortLimits
+from ...physics.scene import changed_values, load_scene, preset_names
 from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, SUBSTEPS,
                         accuracy_paths, channel_path, extra_paths, stored_path)
 
@@ -317,10 +318,21 @@ def effect_rows(snap, effect) -> list[tuple[str, str, str]]:
     return []
 
 
+def changed_from_preset(scene) -> list:
+    """`key old -> new` for what a run changed in the preset its scene is named after (its
+    description was written for the preset); none for a scene of its own."""
+    if scene.name not in preset_names():
+        return []
+    return [change for change in changed_values(load_scene(scene.name), scene)
+            if not change.startswith(("description ", "duration "))]
+
+
 def effects_document(snap) -> str:
     """The effects the scene called for, with their parameters in units, and its books."""
     scene = snap.scene
     about = f": {scene.description}" if scene.description else ""
+    if changed := changed_from_preset(scene):   # the preset's words may no longer hold
+        about += f" (changed from the preset: {'; '.join(changed)})"
     lines = [f"**{scene.name}**{about} ({scene.integrator}, h = {scene.step_size:g} s)", "",
              "| effect | parameter | value | unit |", "|---|---|---|---|"]
     for effect in snap.effects:
