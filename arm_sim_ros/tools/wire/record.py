@@ -9,9 +9,9 @@ than when it arrived: on one machine the two differ by the ~0.3 ms transport lat
 the send time keeps the publishing cadence that `ros2 bag play` reproduces. Messages keep
 their own header stamps; each topic carries the QoS its publishers offered, as discovery
 reports it. The recording stops at Ctrl-C, SIGTERM, SIGHUP or --duration (counted from
-the first message: a recorder started before its node waits for it) within about two
-seconds even under a flood (a second signal stops at once), drains the readers and closes
-the bag, so every message received is kept. Each reader is reliable and keeps the last
+the first message: a recorder started before its node waits --wait for it) within about
+two seconds even under a flood (a second signal stops at once), drains the readers and
+closes the bag, so every message received is kept. Each reader is reliable and keeps the last
 READER_DEPTH samples not yet written (as `ros2 bag record` keeps a keep-last queue): memory
 stays bounded, and a publisher that outpaces the disk for longer loses its oldest
 unwritten samples rather than delaying a stop. Every REPORT_SECONDS a line on stderr gives
@@ -38,6 +38,7 @@ READER_DEPTH = 1000  # samples a reader keeps before it drops its oldest (keep-l
 QUIET_SECONDS = 0.1  # after a stop: no data for this long means everything sent has arrived
 FLUSH_SECONDS = 1.5  # ... and this bounds the wait when publishers keep going
 REPORT_SECONDS = 3.0
+WAIT = 30.0        # with --duration: how long to wait for a first message (send-torque's too)
 
 
 def parse_topic(text: str) -> tuple[str, str]:
@@ -127,14 +128,18 @@ class TopicRecorder:
                         passed.add(name)
         return newest
 
-    def run(self, stop, duration: float | None = None, report=None) -> None:
+    def run(self, stop, duration: float | None = None, report=None,
+            wait: float = WAIT) -> None:
         """Record until `stop.requested` or `duration` wall seconds after the first message
-        (a recorder started before its node waits for it), then flush; `report` (a
-        function taking a line) hears the counts every REPORT_SECONDS."""
+        (a recorder started before its node waits for it, with a duration at most `wait`
+        seconds), then flush; `report` (a function taking a line) hears the counts every
+        REPORT_SECONDS."""
         started = time.monotonic()
         end = None
         next_report = started + REPORT_SECONDS
         while not stop.requested and (end is None or time.monotonic() < end):
+            if end is None and duration is not None and time.monotonic() - started > wait:
+                break                     # nothing came: the caller says so
             self.poll(POLL_SECONDS if end is None
                       else min(POLL_SECONDS, max(0.0, end - time.monotonic())), stop)
             self.writer.checkpoint()
@@ -208,7 +213,7 @@ def offer_from_dds(qos):
 
 
 def record(path, topics: dict[str, str], participant, duration: float | None = None,
-           stop=None, report=None) -> dict[str, int]:
+           stop=None, report=None, wait: float = WAIT) -> dict[str, int]:
     """Record until `stop.requested` or `duration` wall seconds after the first message;
     returns messages per topic.
     The readers come first: a topic DDS refuses leaves no bag behind."""
@@ -217,7 +222,7 @@ def record(path, topics: dict[str, str], participant, duration: float | None = N
     recorder = TopicRecorder(participant, topics)
     with BagWriter(path, start_ns=time.time_ns()) as writer:
         recorder.writer = writer
-        recorder.run(stop or StopOnSignals(), duration, report)
+        recorder.run(stop or StopOnSignals(), duration, report, wait)
         return dict(writer.counts)
 
 
@@ -233,8 +238,9 @@ def cmd_record(args) -> int:
 
     topics = dict(DEFAULT_TOPICS)
     topics.update(parse_topic(t) for text in args.topics or [] for t in text.split(",") if t)
-    if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
-        raise BagError(f"--duration {args.duration} must be a positive number of seconds")
+    for name, value in (("--duration", args.duration), ("--wait", args.wait)):
+        if value is not None and not (isfinite(value) and value > 0):
+            raise BagError(f"{name} {value} must be a positive number of seconds")
     if Path(args.dir).exists():  # refused before joining the network
         raise BagError(f"{args.dir} exists already; a recording never overwrites one")
     participant = make_participant()   # a bad environment: DiscoveryError, one line
@@ -246,7 +252,7 @@ def cmd_record(args) -> int:
     # raises KeyboardInterrupt, and the bag is still closed.
     with StopOnSignals() as stop:
         report(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)")
-        counts = record(args.dir, topics, participant, args.duration, stop, report)
+        counts = record(args.dir, topics, participant, args.duration, stop, report, args.wait)
     if not any(counts.values()):     # an empty bag would only block the next try's name
         clear_output(args.dir)
         print(f"record: no message arrived on {', '.join(topics)}; no bag written. Is the "
@@ -266,6 +272,9 @@ def add_parser(subparsers) -> None:
                         help="more topics to record (repeatable, or comma-separated), e.g. "
                              "/target:JointState,/effort:std_msgs/msg/Float64MultiArray")
     parser.add_argument("--duration", type=float,
-                        help="stop this many seconds after the first message (until one "
-                             "arrives, it waits and says so every 3 s)")
+                        help="stop this many seconds after the first message (a node may "
+                             "start after the recorder)")
+    parser.add_argument("--wait", type=float, default=WAIT,
+                        help=f"with --duration: seconds to wait for a first message "
+                             f"(default {WAIT:g}); then it stops, having recorded nothing")
     parser.set_defaults(func=cmd_record)
