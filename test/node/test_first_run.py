@@ -5,33 +5,20 @@ in plain words. Warnings stay for faults: a tolerance not met at the cap, a moti
 steps too coarse for it."""
 import pytest
 
+from tools.test_no_surprises import ListLog
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import resolve_parameters
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import LEVELS, Event, Simulator
 
 
-class Log:
-    def __init__(self):
-        self.lines = []
-
-    def info(self, message):
-        self.lines.append(("info", message))
-
-    def warning(self, message):
-        self.lines.append(("warning", message))
-
-    def error(self, message):
-        self.lines.append(("error", message))
-
-    debug = info
-
-    def said(self, level):
-        return [message for kind, message in self.lines if kind == level]
+def said(log, level):
+    """What a ListLog heard at `level` ("warning": warnings and errors)."""
+    return [message for kind, message in log.lines if kind == level]
 
 
 def run_node(seconds, **parameters):
-    log = Log()
+    log = ListLog()
     core = ArmSimCore(resolve_parameters(parameters), log, wall_clock=lambda: 0.0)
     for _ in range(round(seconds * core.config.values["publish_rate"])):
         core.tick(0.0)
@@ -42,17 +29,17 @@ def run_node(seconds, **parameters):
 def test_the_default_scene_is_release_and_its_first_run_logs_no_warning():
     core, log = run_node(10.0)          # scripts/run: the default scene, 10 simulated seconds
     assert core.config.scene.name == "release"
-    assert log.said("warning") == [] and log.said("error") == []
-    assert [m for m in log.said("info") if "sub-steps" in m] == [
+    assert said(log, "warning") == []
+    assert [m for m in said(log, "info") if "sub-steps" in m] == [
         "local error 4.06e-05 per s (scaled) for tolerance 5e-05 (aiming at half): each 0.01 s "
         "step is taken as 3 sub-steps (at t = 1.940000 s)"]
 
 
 def test_its_chaos_is_said_once_at_info_in_plain_words():
     _, log = run_node(20.0)
-    assert log.said("warning") == [] and log.said("error") == []
-    said = [m for m in log.said("info") if "unpredictable" in m]
-    assert said == [
+    assert said(log, "warning") == []
+    unpredictable = [m for m in said(log, "info") if "unpredictable" in m]
+    assert unpredictable == [
         "past t = 11.74 s this motion is unpredictable: it is chaotic, and errors far below the "
         "tolerance at each step have grown past 1 rad; the run goes on, but no longer follows "
         "the true motion (the error estimate stops at that bound) (at t = 11.730000 s)"]
