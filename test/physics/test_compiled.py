@@ -123,6 +123,7 @@ def smooth_runs(draw):
     return scene, commands
 
 
+@pytest.mark.hunt
 @settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 25)), deadline=None,
           derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

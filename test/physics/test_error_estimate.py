@@ -194,6 +194,7 @@ def random_scenes(draw):
     return Scene(**keys)
 
 
+@pytest.mark.hunt
 @settings(max_examples=12, deadline=None, derandomize=True, database=None,
           suppress_health_check=list(HealthCheck))
 @given(random_scenes())
