@@ -98,3 +98,21 @@ def test_tolerance_labels_never_overlap(drawn):
     boxes = [t.get_window_extent(renderer) for t in ax.texts]
     assert 1 <= len(boxes) < 8                           # crowded points share one label
     assert not any(a.overlaps(b) for a, b in combinations(boxes, 2))
+
+
+def test_every_tolerance_label_is_inside_its_panel(drawn):
+    """The sweep's last point is the panel's rightmost: its label went past the edge."""
+    fig, _, _ = drawn([result("scene0"), result("scene1")])
+    renderer = renderer_of(fig)
+    for ax in (ax for ax in fig.axes if ax.axison):
+        frame = ax.get_window_extent(renderer)
+        boxes = [t.get_window_extent(renderer) for t in ax.texts]
+        assert boxes and all(frame.x0 <= b.x0 and b.x1 <= frame.x1 for b in boxes)
+
+
+def test_the_title_names_mujoco_only_when_it_ran(drawn):
+    with_peer = result("scene0")
+    alone = dict(with_peer, runs=[r for r in with_peer["runs"] if r["kind"] != "mujoco"])
+    assert "ours and MuJoCo" in drawn([with_peer])[0]._suptitle.get_text()
+    title = drawn([alone])[0]._suptitle.get_text()
+    assert "MuJoCo" not in title and "our integrators" in title

@@ -147,8 +147,10 @@ def plot(results, path: str) -> None:
     columns = min(MAX_COLUMNS, len(results))
     rows = ceil(len(results) / columns)
     width = PANEL_SIZE[0] * columns
-    title = textwrap.fill("What accuracy costs: max state error vs CPU time, ours and MuJoCo "
-                          "on the same scenes", width=int(width * 72 / (12 * 0.55)))
+    peers = any(r["kind"] == "mujoco" for result in results for r in result["runs"])
+    title = textwrap.fill("What accuracy costs: max state error vs CPU time, "
+                          + ("ours and MuJoCo on the same scenes" if peers else "our integrators"),
+                          width=int(width * 72 / (12 * 0.55)))
     entries = len(legend_labels(results))
     ncols = max(1, min(entries, int(width // LEGEND_COLUMN_INCHES)))
     # the figure grows by what the title and the legend need: the panels keep their size
@@ -214,6 +216,9 @@ def _label(name: str, run: dict) -> str:
 
 def panel(ax, result: dict) -> None:
     labelled = []                     # (log10 x, log10 y) of the tolerance labels so far
+    # the rightmost point's label goes left of it: right of it, it ran past the panel's edge
+    rightmost = max((r["cpu_s_per_sim_s"] for r in result["runs"]
+                     if isfinite(r["max_state_error"]) and r["max_state_error"] > 0), default=0)
     for name in dict.fromkeys(r["series"] for r in result["runs"]):
         runs = [r for r in result["runs"] if r["series"] == name
                 and isfinite(r["max_state_error"]) and r["max_state_error"] > 0]
@@ -228,8 +233,10 @@ def panel(ax, result: dict) -> None:
                 if _crowded(labelled, log10(x), log10(y)):
                     continue
                 labelled.append((log10(x), log10(y)))
+                last = r["cpu_s_per_sim_s"] >= rightmost
                 ax.annotate(f"{r['tolerance']:g}", (x, y), fontsize=6.5, color=style["color"],
-                            textcoords="offset points", xytext=(4, 2))
+                            textcoords="offset points", xytext=(-4, -3) if last else (4, 2),
+                            ha="right" if last else "left", va="top" if last else "baseline")
     floor = result["peers"].get("mujoco", {}).get("floor")
     if floor:
         ax.axhline(floor, label=FLOOR_LABEL, **FLOOR_LINE)
