@@ -185,7 +185,7 @@ def test_the_slowest_node_still_stops_on_sigterm_at_once(tmp_path):
 def test_a_tick_of_minutes_stops_on_one_sigterm():
     """The elbow reaches a compliant stop of damping 1e8 in the second tick, which (with the
     cap on sub-steps raised) would take minutes: SIGTERM ends the node from inside it."""
-    env = os.environ | {"ROS_DOMAIN_ID": "201", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = os.environ | {"ROS_DOMAIN_ID": "206", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen(
         [sys.executable, "-c", "import sys\nfrom arm_sim_ros.physics.stepping import stability\n"
          "stability.MAX_SUBSTEPS = 10 ** 9\n"
@@ -232,7 +232,7 @@ sys.exit(main(sys.argv[1:]))
 
 
 def test_a_signal_whose_interrupt_a_c_callback_drops_still_stops_the_node():
-    env = os.environ | {"ROS_DOMAIN_ID": "202", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = os.environ | {"ROS_DOMAIN_ID": "207", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen([sys.executable, "-c", SIGNAL_IN_A_CALLBACK, "--transport",
                                 "dds", "--quiet"], env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
