@@ -28,6 +28,11 @@ CASES = {
 }
 
 
+# The throwaway suites load no installed plugin (xdist, hypothesis's, ...): the conftest needs
+# none, and loading them all made each run's start about three times as long.
+NO_PLUGINS = {"PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"}
+
+
 def run_suite(tmp_path, tests, plugin, args):
     shutil.copy(CONFTEST, tmp_path / "conftest.py")
     (tmp_path / "pytest.ini").write_text("[pytest]\n")
@@ -36,6 +41,7 @@ def run_suite(tmp_path, tests, plugin, args):
         (tmp_path / "late.py").write_text(plugin)
     env = {k: v for k, v in os.environ.items() if k != "ARM_SIM_KEEP_TEARDOWN"}
     env["PYTHONPATH"] = str(tmp_path)
+    env |= NO_PLUGINS
     return subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *args],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
@@ -92,7 +98,8 @@ def test_a_suite_that_changes_the_checkout_fails_and_names_what_changed(tmp_path
         f"from pathlib import Path\nROOT = Path({str(checkout)!r})\n{tests}")
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            "test"], cwd=checkout, capture_output=True, text=True, timeout=120,
-                          env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+                          env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+                          | NO_PLUGINS)
     assert done.returncode == expected, done.stdout + done.stderr
     assert "1 passed" in done.stdout
     if lines:
