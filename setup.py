@@ -38,7 +38,8 @@ setup(
         "tqdm==4.70.1",          # progress on a terminal
     ],
     extras_require={
-        "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
+        "test": ["pytest==9.0.3", "hypothesis==6.155.2",
+                 "pytest-xdist==3.8.0"],   # the suite on every core (setup.cfg: -n auto)
         "bench": ["mujoco==4.0.0"],
         "fit": ["dask==2026.8.0", "distributed==2026.8.0"],   # arm-sim fit --scheduler
         "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled/build.py)

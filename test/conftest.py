@@ -18,8 +18,9 @@ bad -k expression, still propagating while pytest unconfigures) keeps the normal
 pytest prints its message only afterwards.
 
 The suite leaves the checkout as it found it: `git status` (ignored files too, each with its
-size and time) is taken before the first test and compared after the last; any difference
-fails the run (exit 1) with the paths, whatever each test reported. Left out: what Python
+size and time) is taken before the first test and compared after the last, by the process
+that runs the suite (not its xdist workers); any difference fails the run (exit 1) with the
+paths, whatever each test reported. Left out: what Python
 and pip keep there (byte code, numba's cache beside it, the venvs, *.egg-info) and pytest's
 own .pytest_cache. Hypothesis keeps its files in a temporary directory, not in .hypothesis/
 of the working directory, and draws the same examples every run (derandomize, no database):
@@ -88,7 +89,9 @@ def changed_paths(before: dict, after: dict) -> list:
 def pytest_sessionstart(session):
     _session[:] = [session]
     session.config.stash[CHANGED] = []
-    session.config.stash[BEFORE] = checkout_state()
+    # the run's own process says it; an xdist worker is a part of the run
+    worker = hasattr(session.config, "workerinput")
+    session.config.stash[BEFORE] = None if worker else checkout_state()
 
 
 def pytest_sessionfinish(session):
