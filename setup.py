@@ -54,6 +54,7 @@ setup(
         "console_scripts": [
             "arm-sim = arm_sim_ros.tools.cli:main",
             "arm_sim_node = arm_sim_ros.node.main:main",
+            "arm_sim_controllers = arm_sim_ros.tools.control.follower:main",
         ],
     },
 )

@@ -5,6 +5,9 @@ that talk to it; it imports nothing.
 """
 NODE_NAME = "arm_sim"
 JOINT_STATES_TOPIC = "joint_states"
+# With `sensors` joint_states carries the readings, and the node publishes the truth here
+# (sensor_msgs/JointState, same stamps); below: its absolute name in the root namespace.
+TRUE_JOINT_STATES_TOPIC = "~/true_joint_states"
 COMMAND_TOPIC = "joint_torque_commands"
 JOINT_COMMANDS_TOPIC = "joint_commands"          # sensor_msgs/JointState efforts (ros2_control)
 # Float64MultiArray [joint 1, joint 2] set-points of the servos, by field they set
@@ -24,13 +27,17 @@ CLOCK = "rosgraph_msgs/msg/Clock"
 PUBLISHES = {
     JOINT_STATES_TOPIC: (JOINT_STATE, "every tick: position (rad, unwrapped), velocity "
                          "(rad/s) and effort (the torque the joints receive, N m), stamped "
-                         "with simulated time"),
+                         "with simulated time; with `sensors`, position and velocity as read"),
     "/clock": (CLOCK, "simulated time, every tick, equal to the JointState stamps "
                "(publish_clock)"),
     DIAGNOSTICS_TOPIC: (DIAGNOSTIC_ARRAY, "1 Hz: refused commands, real-time factor, energy "
                         "balance residual, late ticks, the error estimate"),
     "/parameter_events": ("rcl_interfaces/msg/ParameterEvent", "every accepted parameter change"),
+    TRUE_JOINT_STATES_TOPIC: (JOINT_STATE, "with `sensors` only (from the first tick they are "
+                              "set): the state itself, same stamps, while joint_states "
+                              "carries the readings"),
 }
+WITH_SENSORS = (TRUE_JOINT_STATES_TOPIC,)    # published only while the scene has sensors
 SUBSCRIBES = {
     COMMAND_TOPIC: (FLOAT64_MULTI_ARRAY, "[tau1, tau2] N m, held until the next one; zero "
                     "after command_timeout"),
@@ -78,9 +85,11 @@ def wrong_type(topic: str, message_type: str) -> str | None:
 
 
 # What the node publishes and takes, by absolute name (as a bag of it lists them).
+TRUE_JOINT_STATES = f"/{NODE_NAME}/true_joint_states"
 NODE_TOPICS = {"/" + JOINT_STATES_TOPIC: JOINT_STATE,
                "/" + COMMAND_TOPIC: FLOAT64_MULTI_ARRAY,
                DIAGNOSTICS_TOPIC: DIAGNOSTIC_ARRAY}
+SENSOR_TOPICS = {TRUE_JOINT_STATES: JOINT_STATE}     # published beside them with `sensors`
 
 # Diagnostic levels, as diagnostic_msgs/DiagnosticStatus numbers them.
 OK, WARN, ERROR = 0, 1, 2

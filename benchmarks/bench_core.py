@@ -11,8 +11,10 @@ at vanishing strength, i.e. what "a term multiplied by zero" would cost.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from math import cos, sin
+from pathlib import Path
 
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
@@ -102,6 +104,36 @@ def fastest(run, repeat: int, setup=None) -> float:
         run()
         best = min(best, time.perf_counter() - start)
     return best
+
+
+class TreeWorker:
+    """A worker process timing on another source tree (PYTHONPATH = the tree, so that it wins
+    over the editable install): `source` prints where it imported arm_sim_ros from, then for
+    each line on its stdin one line of times; `best` keeps the least of each."""
+
+    def __init__(self, tree: Path, source: str, *args: str):
+        import os
+        import subprocess
+
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        self.process = subprocess.Popen([sys.executable, "-c", source, *args], cwd=tree,
+                                        env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        text=True)
+        where = Path(self.process.stdout.readline().strip() or "(the worker failed)")
+        if tree.resolve() not in where.resolve().parents:
+            self.close()
+            sys.exit(f"--before {tree}: imported arm_sim_ros from {where}, not from the tree")
+        self.best = None
+
+    def run(self) -> None:
+        self.process.stdin.write("\n")
+        self.process.stdin.flush()
+        times = [float(t) for t in self.process.stdout.readline().split()]
+        self.best = times if self.best is None else [min(b, t) for b, t in zip(self.best, times)]
+
+    def close(self) -> None:
+        self.process.stdin.close()
+        self.process.wait()
 
 
 def time_simulator(scene_or_sim, steps, repeat) -> float:

@@ -34,7 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # the sibling benchmark scripts
 
-from bench_core import fastest, time_simulator  # noqa: E402  (best-of-repeats timing)
+from bench_core import TreeWorker, fastest, time_simulator  # noqa: E402  (best of repeats)
 
 from arm_sim_ros.physics import model as arm_model  # noqa: E402
 from arm_sim_ros.physics.effects import Motors  # noqa: E402
@@ -229,34 +229,13 @@ for _ in sys.stdin:
 BEFORE_ROWS = ("effect-free arm (release)", "damping 0.5 (one value for both joints)")
 
 
-class BeforeTree:
+class BeforeTree(TreeWorker):
     """The pre-effects source tree (flat layout: arm_sim_ros.scene, arm_sim_ros.simulator) in a
-    worker process, PYTHONPATH = the tree so that it wins over the editable install; each
-    run() is one timed run of --steps steps per BEFORE_ROWS scene, interleaved with ours."""
+    worker process; each run() is one timed run of --steps steps per BEFORE_ROWS scene,
+    interleaved with ours."""
 
     def __init__(self, tree: Path, steps: int):
-        import os
-        import subprocess
-
-        env = dict(os.environ, PYTHONPATH=str(tree))
-        self.process = subprocess.Popen(
-            [sys.executable, "-c", BEFORE_WORKER, str(steps), repr(STEP)], cwd=tree, env=env,
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        where = Path(self.process.stdout.readline().strip() or "(the worker failed)")
-        if tree.resolve() not in where.resolve().parents:
-            self.close()
-            sys.exit(f"--before {tree}: imported arm_sim_ros from {where}, not from the tree")
-        self.best = [float("inf")] * len(BEFORE_ROWS)
-
-    def run(self) -> None:
-        self.process.stdin.write("\n")
-        self.process.stdin.flush()
-        times = [float(t) for t in self.process.stdout.readline().split()]
-        self.best = [min(b, t) for b, t in zip(self.best, times)]
-
-    def close(self) -> None:
-        self.process.stdin.close()
-        self.process.wait()
+        super().__init__(tree, BEFORE_WORKER, str(steps), repr(STEP))
 
 
 # ---------------------------------------------------------------- the table

@@ -3,7 +3,8 @@
 # installed from another checkout, or it lacks the extras asked for; a stamp file per extras
 # set in the venv holds setup.py's hash and this checkout's path. So after set-up both
 # scripts start in well under a second and work with no network.
-#   ensure_venv EXTRAS    (EXTRAS: "" for the package alone, "test,bench" for the suite)
+#   ensure_venv EXTRAS    (EXTRAS: "" for the package alone, "test,bench" for the suite;
+#                          the extra `fast`, numba, comes with either where it has a wheel)
 # Needs: root (this checkout, absolute) and venv set by the caller. The venv is made with
 # $ARM_SIM_PYTHON (default python3); a Python older than setup.py's python_requires is
 # refused in one line before pip runs (the pinned numpy and scipy would not install).
@@ -55,9 +56,14 @@ ensure_venv() {
   target="$root"
   [ -n "$extras" ] && target="$root[$extras]"
   echo "scripts: installing $target into $venv (setup.py is new to this venv)" >&2
-  "$venv/bin/python" -m pip install -q --disable-pip-version-check -e "$target" || {
-    echo "scripts: error: pip could not install the dependencies (no network on first set-up?); run again when online" >&2
-    exit 1; }
+  # With the extra `fast` (numba: the compiled path) where a wheel exists for this machine;
+  # numba is never built from source, and a machine without a wheel runs the pure-Python path.
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check --only-binary numba,llvmlite \
+      -e "$root[${extras:+$extras,}fast]" 2>/dev/null || {
+    "$venv/bin/python" -m pip install -q --disable-pip-version-check -e "$target" || {
+      echo "scripts: error: pip could not install the dependencies (no network on first set-up?); run again when online" >&2
+      exit 1; }
+    echo "scripts: numba (the compiled path) has no wheel for this machine: the simulator runs its pure-Python path (slower, the same numbers)" >&2; }
   printf '%s\n' "$want" > "$stamp"
   # the full install also satisfies the plain one
   [ -n "$extras" ] && printf '%s\n' "$want" > "$venv/.arm_sim_ros-installed"

@@ -14,8 +14,8 @@ from math import isfinite
 
 from ..interface import NODE_NAME
 from ..physics.effects import servo
-from ..physics.scene import angle_warning, changed_values, load_scene
-from ..physics.urdf.read import read_urdf
+from ..physics.scene import angle_warning, load_scene
+from ..physics.urdf.read import changed_values, read_urdf
 from ..physics.simulator import Simulator
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
@@ -113,22 +113,25 @@ class ArmSimCore(CommandInput):
         self.recorder.hand_over()
         if names:          # the transaction (rebuild.py); a servo switches bumplessly
             change_live(self.sim, config, names)
-            self.commands.value = tuple(self.sim.dynamics.command)
+            self.commands.value = tuple(self.sim.dynamics.given)
         self.config = config
         if names:
             self.recorder.start(self.sim)
             self._event(live_change(names, config.values, self.sim.time))
 
-    def tick(self, wall_now: float | None = None) -> JointStateData | None:
+    def tick(self, wall_now: float | None = None,
+             clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
         lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless no tick came for lockstep_wait. Paused:
-        the held state, time standing still."""
+        the transport publishes them): None, unless a node listens on /clock
+        (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
+        it commands) and no tick came for lockstep_wait. Paused: the held state, time
+        standing still."""
         if self.paused:
             return self.joint_state()
         if not self.config.values["lockstep"]:
             return self._tick(wall_now)
-        wait = self.config.values["lockstep_wait"]
+        wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
         return self._tick(now) if wait and (last is None or now - last >= wait) else None
@@ -147,7 +150,7 @@ class ArmSimCore(CommandInput):
         if not self.held:
             if self.commands.timed_out(self.sim.time, self.config.values["command_timeout"]):
                 self._set_command(0.0, 0.0)
-                servo.hold(self.sim.dynamics, self.sim.state)
+                servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
         return self.joint_state()
@@ -162,7 +165,8 @@ class ArmSimCore(CommandInput):
         sim = self.sim
         before = (sim.state, sim.steps)
         self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
-        if sim.holding or not all(isfinite(v) for v in sim.state):
+        total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
+        if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
             # The simulator refused a step that would leave the finite numbers; hold the
             # whole tick so joint_states never carries a non-finite number.
             self.recorder.hand_over()
@@ -172,19 +176,26 @@ class ArmSimCore(CommandInput):
                            f"{sim.time:.6f} s); holding until reset")
             self.recorder.event("integration not finite: holding", "error")
             return
-        self.max_abs_residual = max(self.max_abs_residual, abs(sim.residual()))
+        residual = abs(sim.residual())
+        if residual > self.max_abs_residual:      # as max() keeps it, NaN included
+            self.max_abs_residual = residual
 
     def stamp_ns(self) -> int:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
 
     def joint_state(self) -> JointStateData:
         """Positions, velocities and the torque the joints receive (after gearing, windings
-        and effort limits: what a joint torque sensor would read)."""
-        y = self.sim.state
+        and effort limits: what a joint torque sensor would read). With `sensors`, positions
+        and velocities are the readings (physics/sensing/), and `truth` the state itself,
+        same stamp (~/true_joint_states)."""
+        y, values = self.sim.state, self.config.values
         tau = self.sim.joint_torque(y)
-        return JointStateData(self.stamp_ns(), self.config.values["frame_id"],
-                              self.config.values["joint_names"], [y[0], y[1]], [y[2], y[3]],
-                              [float(tau[0]), float(tau[1])])
+        truth = JointStateData(self.stamp_ns(), values["frame_id"], values["joint_names"],
+                               [y[0], y[1]], [y[2], y[3]], [float(tau[0]), float(tau[1])])
+        if self.sim.scene.sensors is None:
+            return truth
+        r = self.sim.readings
+        return truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
 
     def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")

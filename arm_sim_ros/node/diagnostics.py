@@ -5,16 +5,19 @@ The diagnostic keys are one list, used by the node and by `arm-sim run --bag`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
+
+from ..physics.trust.unestimated import NO_ESTIMATE
 
 
-@dataclass(frozen=True)
-class JointStateData:
+class JointStateData(NamedTuple):   # one a tick: a tuple is built in a third of the time
     stamp_ns: int
     frame_id: str
     name: list
     position: list
     velocity: list
     effort: list
+    truth: JointStateData | None = None   # with sensors: the state itself (~/true_joint_states)
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,9 @@ def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held:
         # physics/compiled/build.py: which code takes runs of plain steps (extra `fast`)
         ("compute_path", sim.path),
         ("refused_steps", str(sim.refused_steps)),
-        # physics/trust/accuracy.py: the latest local error estimate and their sum since reset
+        # physics/trust/accuracy.py: the latest local error estimate and their sum since reset;
+        # none where the scene's estimate is off (physics/trust/unestimated.py)
+        ("estimate", f"off: {NO_ESTIMATE}" if sim.scene.estimate == "off" else "global"),
         ("error_estimate", f"{sim.error_estimate:.3e}"),
         ("accumulated_error", f"{sim.accumulated_error:.3e}"),
         # Friction, limits and clamps switched inside steps, by kind (none without them).

@@ -20,7 +20,8 @@ from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
 from ..usage import DONE, REFUSED, ArgumentParser, UsageError, one_line
-from .params.parameters import PARAMETERS, ParameterRefused, when_changed
+from .params.parameters import PARAMETERS, when_changed
+from .params.values import ParameterRefused
 from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
                               node_parameters, parse_ros_args, split_ros_args)  # noqa: F401
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 
+from ..physics.simulator import recorded_row
 from ..recording.readouts import error_books
 
 # Steps collected before the recorder gets them in one call: 0.1 s behind at the default one
@@ -108,7 +109,7 @@ class RecorderLink:
             keep, book, every = self._unrecorded.append, self._books.extend, self._books_every
             for _ in range(steps):
                 advance()
-                keep(sim.state)
+                keep(recorded_row(sim))
                 if every and sim.steps % every == 0:
                     book(error_books(sim))
             if len(self._unrecorded) >= RECORD_EVERY:

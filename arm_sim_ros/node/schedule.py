@@ -38,3 +38,10 @@ class TickSchedule:
         self.next_tick += period
         if self.next_tick < now - max(period, CATCH_UP):
             self.next_tick = now
+
+
+# Wall seconds from the JointState of a tick a command made (lockstep) to its /clock: a
+# use_sim_time controller (controller_manager) wakes on /clock and reads the latest JointState
+# its hardware has taken, in another thread; written together, it often had not yet taken
+# this one and acted on the state a tick older.
+STATE_BEFORE_CLOCK = 0.001

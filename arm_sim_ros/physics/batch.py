@@ -47,6 +47,15 @@ def _per_arm(name: str, value, count: int, pair: bool) -> np.ndarray:
     return array
 
 
+def sampled_arm_by_arm(scene) -> str:
+    """What of the scene takes samples arm by arm, which a batch cannot ('' if nothing): a
+    discrete servo, sensors, a command delay."""
+    return " or ".join(what for what, named in (
+        ("a discrete servo (servo.rate)", (scene.servo or {}).get("rate")),
+        ("sensors", scene.sensors is not None), ("a command_delay", scene.command_delay))
+        if named)
+
+
 def _refuse_where(mask: np.ndarray, message: str) -> None:
     if mask.any():
         arm = int(np.argmax(mask.reshape(len(mask), -1).any(axis=1)))
@@ -75,14 +84,14 @@ class Batch:
             raise SceneError(f"batch rollouts cannot run {' or '.join(switching)}: its switches "
                              "are located arm by arm (physics/switching/events.py); run such a scene "
                              "one arm at a time (arm-sim run)")
-        if (scene.servo or {}).get("rate"):     # its samples are taken arm by arm
-            raise SceneError("batch rollouts cannot run a discrete servo (servo.rate); arm-sim run")
+        if sampled := sampled_arm_by_arm(scene):
+            raise SceneError(f"batch rollouts cannot run {sampled}; arm-sim run")
         if count is None:
             count = len(positions) if positions is not None else (
                 len(velocities) if velocities is not None else 1)
         if count < 1:
             raise SceneError(f"a batch needs at least one arm, got {count}")
-        self.scene, self.count, self.step_size = scene, count, scene.step_size
+        self.scene, self.count, self.step_size = unestimated(scene), count, scene.step_size
         # Per-joint damping stays the scene's effect; per-arm damping is a scalar per arm.
         self._shared_damping = "damping" not in parameters
         scene_values = {name: getattr(scene, name) for name in PAIR_PARAMETERS + SCALAR_PARAMETERS}
@@ -189,7 +198,7 @@ class Batch:
         stiffest = scene.replace(**{name: tuple(v[name][i]) for name in LINK_PARAMETERS})
         if not self._shared_damping:
             stiffest = stiffest.replace(damping=float(v["damping"].max()))
-        return Simulator(stiffest).substeps
+        return Simulator(unestimated(stiffest)).substeps
 
     def reset(self) -> None:
         self.state = [a.copy() for a in self._initial] + [
@@ -323,7 +332,7 @@ def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int
     elapsed = time.perf_counter() - start
     worst = 0.0
     for i in sorted({0, count // 2, count - 1}):
-        sim = Simulator(scene.replace(initial_positions=tuple(positions[i])))
+        sim = Simulator(unestimated(scene).replace(initial_positions=tuple(positions[i])))
         for _ in range(steps):
             sim.step()
         worst = max(worst, float(np.max(np.abs(np.array(sim.state[:4]) -
@@ -332,6 +341,12 @@ def throughput(scene: Scene, count: int, steps: int, threads: int = 1, seed: int
     return {"arms": count, "steps": steps, "threads": threads, "seconds": elapsed,
             "arm_steps_per_s": count * steps / elapsed, "non_finite_arms": int((~finite).sum()),
             "max_diff_vs_single_arm": worst}
+
+
+def unestimated(scene: Scene) -> Scene:
+    """`scene` as a batch steps it: the planned steps alone, no error estimate (estimate off,
+    tolerance 0), as the single-arm simulator then takes them too."""
+    return scene.replace(estimate="off", tolerance=0.0)
 
 
 def _servo_setpoint(scene, setpoint, q0) -> list:

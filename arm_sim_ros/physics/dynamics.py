@@ -15,6 +15,7 @@ from math import cos, sin
 
 from . import model
 from .effects import Channel, Effect, scene_effects
+from .sensing import drives
 
 RIGID_BODY = [
     "    c = cos(q2)",
@@ -53,8 +54,13 @@ class Dynamics:
     channel_kinds: tuple[str, ...]    # "input", "loss" or "transfer", per channel
     arm: model.ArmParameters
     torque_function: object           # the same lines up to the joint torque: (t1, t2)
-    command: list = field(default_factory=lambda: [0.0, 0.0])
+    command: list = field(default_factory=lambda: [0.0, 0.0])   # the torque the code reads
     decay: tuple = ()                 # the extra states' linear decay rates (R/L), 1/s
+    given: list | None = None         # where commands are given: `command` itself, or under a
+                                      # control loop (sensing/loop.py) the loop's input
+
+    def __post_init__(self):
+        self.given = self.command if self.given is None else self.given
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -182,6 +188,11 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
 
 
 def build_dynamics(scene, command=None) -> Dynamics:
-    """The dynamics of a scene: exactly the effects it names (effects/scene_effects)."""
+    """The dynamics of a scene: exactly the effects it names (effects/scene_effects); under a
+    control loop the drive reads the loop's torque, and `command` is the loop's input."""
     command = [0.0, 0.0] if command is None else command
-    return assemble(scene.arm, scene_effects(scene, command), command, label=scene.policy)
+    acting = [0.0, 0.0] if drives(scene) else None
+    dynamics = assemble(scene.arm, scene_effects(scene, command, acting),
+                        command if acting is None else acting, label=scene.policy)
+    dynamics.given = command
+    return dynamics

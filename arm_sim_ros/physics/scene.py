@@ -14,8 +14,10 @@ from pathlib import Path
 from .. import yaml_files
 from ..usage import did_you_mean
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
+from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
+from . import sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
@@ -25,6 +27,10 @@ ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower
               "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
+# Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
+# a validated mapping is built for its cross-checks.
+MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
+BUILT = BUILDERS | {"sensors": sensing.Sensors}
 
 
 class SceneError(ValueError):
@@ -55,11 +61,16 @@ class Scene:
     friction: dict | None = None
     joint_limits: dict | None = None
     servo: dict | None = None
+    sensors: dict | None = None      # what is read in place of the state (physics/sensing/)
+    command_delay: float = 0.0       # s: a command given at t acts from t + command_delay
     integrator: str = "rk4"
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
     max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
+    # what a run computes of its own error (trust/unestimated.py): global (the shadow and
+    # its checks) or off (the steps alone: no error estimate, so tolerance 0)
+    estimate: str = "global"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -91,6 +102,13 @@ class Scene:
         if not self.tolerance >= 0:
             raise SceneError(f"tolerance = {self.tolerance} must be >= 0 (local error per "
                              "simulated second; 0: estimate only, never split a step)")
+        if self.estimate not in ESTIMATES:
+            raise SceneError(f"estimate {self.estimate!r} is unknown; choose global (the "
+                             "error estimate, the default) or off (none)")
+        if self.estimate == "off" and self.tolerance != 0:
+            raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
+                             f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
+                             "out (estimate off alone sets it to 0)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
@@ -116,6 +134,7 @@ class Scene:
         arm = self.arm
         try:
             effects = scene_effects(self)
+            sensing.check(self)          # whole numbers of steps
         except ParameterError as error:
             raise SceneError(str(error)) from None
         for effect in effects:
@@ -150,13 +169,15 @@ class Scene:
         merged = {}
         for key, value in overrides.items():
             effect, dot, parameter = key.partition(".")
-            if dot and effect in MAPPING_EFFECTS:
+            if dot and effect in MAPPINGS:
                 current = merged.get(effect, getattr(self, effect)) or {}
                 merged[effect] = dict(current) | {parameter: value}
             elif key in FIELD_KINDS:
                 merged[key] = value
             else:
                 raise SceneError(unknown_key(key))
+        if merged.get("estimate") == "off" and "tolerance" not in merged:
+            merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
 
     def with_text_overrides(self, assignments) -> "Scene":
@@ -186,7 +207,7 @@ class Scene:
 FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
                         "float" if f.type == "float" else "str") for f in fields(Scene)}
 FIELD_KINDS |= {"damping": "float_or_pair", "effort_limits": "pair_or_none"}
-FIELD_KINDS |= {name: "effect" for name in MAPPING_EFFECTS}
+FIELD_KINDS |= {name: "effect" for name in MAPPINGS}
 
 
 def _pair(value) -> tuple:
@@ -225,9 +246,9 @@ def coerce_value(name: str, kind: str, value):
         if value is None:
             return None
         try:
-            values = validate(name, MAPPING_EFFECTS[name].parameters, value)
-            if name in BUILDERS:
-                BUILDERS[name](**values)  # its cross-checks: windings all three or none ...
+            values = validate(name, MAPPINGS[name].parameters, value)
+            if name in BUILT:
+                BUILT[name](**values)     # its cross-checks: windings all three or none ...
         except ParameterError as error:
             raise SceneError(str(error)) from None
         return values
@@ -271,8 +292,8 @@ def unknown_key(key: str) -> str:
 def parse_value(key: str, text: str):
     """A value as the command line writes it: numbers, pairs as `1,0`, text."""
     effect, dot, name = key.partition(".")
-    if dot and effect in MAPPING_EFFECTS:
-        known = {p.name: p for p in MAPPING_EFFECTS[effect].parameters}
+    if dot and effect in MAPPINGS:
+        known = {p.name: p for p in MAPPINGS[effect].parameters}
         if name not in known:
             raise SceneError(f"{key} is not a key of {effect}; "
                              f"{did_you_mean(key, [f'{effect}.{k}' for k in known])}its keys: "
@@ -299,19 +320,6 @@ def parse_value(key: str, text: str):
         raise SceneError(f"{key}={text!r} is malformed: expected "
                          f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
     return text
-
-
-def changed_values(scene: "Scene", other: "Scene") -> list[str]:
-    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
-    what a URDF replaced."""
-    def shown(value):
-        if isinstance(value, tuple):
-            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
-        if isinstance(value, dict):
-            return "{" + ", ".join(value) + "}"
-        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
-    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
-            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]
 
 
 def angle_warning(scene: "Scene", node: bool = False) -> str | None:

@@ -17,32 +17,31 @@ from dataclasses import dataclass, field
 from math import isfinite, nan
 
 from .trust import accuracy, guard
-from .compiled import build as compiled
+from .compiled import runs as compiled
 from . import model
 from .stepping import stability
 from .switching.events import switching as switching_for
 from .dynamics import build_dynamics
 from .effects import servo
+from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
 from .scene import Scene
 from .compiled.switch_run import Switched
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
-
-
 # How loud each kind of event is, for every listener (the node's log, a recording's text
 # log, arm-sim run): what the physics does by design is information (a switch, the
 # tolerance taking more sub-steps, a chaotic motion becoming unpredictable); what costs
 # accuracy or time is a warning (substepping, accuracy, saturation, servo); a refused step
 # or broken books an error.
-LEVELS = {"switch": "info", "tolerance": "info", "unpredictable": "info",
+LEVELS = {"switch": "info", "substeps": "info", "unpredictable": "info",
           "books": "error", "fault": "error"}
 
 
 @dataclass(frozen=True)
 class Event:
     """Something the simulator did that a person should hear about (kind: substepping,
-    tolerance, unpredictable, accuracy, fault, saturation...), at its LEVELS level."""
+    substeps, unpredictable, accuracy, fault, saturation...), at its LEVELS level."""
 
     t: float
     kind: str
@@ -70,6 +69,7 @@ class Sample:
     channels: dict = field(default_factory=dict)   # every channel by name
     inputs: float | None = None    # Σ input channels (None: the actuator work alone)
     losses: float | None = None    # Σ loss channels (None: the dissipated energy alone)
+    measured: tuple | None = None  # with sensors: (q1, q2, q̇1, q̇2) as read (sensing/)
 
     @property
     def total(self) -> float:
@@ -87,7 +87,9 @@ class Sample:
         return {"t": self.t, "q": list(self.q), "qd": list(self.qd), "tau": list(self.tau),
                 **self.extra, "kinetic": self.kinetic, "potential": self.potential,
                 "total": self.total, "work": self.work, "dissipated": self.dissipated,
-                "channels": dict(self.channels), "residual": self.residual}
+                "channels": dict(self.channels), "residual": self.residual} | (
+                    {} if self.measured is None else {"q_measured": list(self.measured[:2]),
+                                                      "qd_measured": list(self.measured[2:])})
 
 
 class Simulator:
@@ -129,7 +131,7 @@ class Simulator:
         self.fault = None            # why the latest refused step was refused, None if none
         self.refused_steps, self._refused_step = 0, -1    # how many; the latest's index
         self.saturated_steps = 0     # steps ending where a driver asks beyond its voltage limit
-        self.dynamics.command[:] = [0.0, 0.0]
+        self.dynamics.given[:] = [0.0, 0.0]
         self.initial_energy = self.energy(self.state)
         self.diverged = None         # why the run diverged (guard.py), held until reset
         self.retired = (0.0, 0.0)    # (inputs, losses) of channels change_scene removed
@@ -140,14 +142,14 @@ class Simulator:
         self.accuracy.reset()
         if self.sampled is not None:     # what the first sample will hold: no stale torque
             self.sampled.held[:] = self.sampled.law(self.state, torque_only=True)
+        if self.sensing is not None: self.sensing.reset(self)   # noqa: E701 (sample 0)
 
     @property
     def time(self) -> float:
         return self.steps * self.step_size
 
     def set_command(self, tau1: float, tau2: float, setpoints=None) -> None:
-        """The torque the `command` policies hold, and a servo's set-points, until the next
-        call (set_command below)."""
+        """The command and a servo's set-points, held until the next call (set_command)."""
         set_command(self, tau1, tau2, setpoints)
 
     def set_payload(self, mass: float) -> None:
@@ -166,13 +168,12 @@ class Simulator:
     def change_scene(self, scene: Scene) -> None:
         """From the next step, `scene`'s effects; time, state and books kept (step size too)."""
         carried, was = dict(zip(self.state_names, self.state)), self.books(self.state)
-        self._build(scene, self.dynamics.command)
+        self._build(scene, self.dynamics.given)
         self.state = self._sound = tuple(carried.get(n, 0.0) for n in self.state_names)
         self.retired = tuple(r + w - n for r, w, n in zip(self.retired, was, self.books(self.state)))
 
-    @property
-    def substeps_taken(self) -> int:   # in split steps since reset (accuracy.py, events.py)
-        return self.accuracy.taken(self.steps)
+    substeps_taken = property(lambda self: self.accuracy.taken(self.steps))   # split steps
+    readings = property(lambda self: readings(self))    # (q1, q2, q̇1, q̇2) as the sensors read
 
     @property
     def error_estimate(self) -> float:
@@ -199,6 +200,7 @@ class Simulator:
             self._refuse(self.diverged, "the last sound state")
             self.steps += 1
             return
+        if self.sensing is not None: self.sensing.before(self)   # noqa: E701 (sensing/)
         books = self.accuracy       # plain planned steps until a check is due: no wrapper
         take = books.plain if self.steps < books.due else books.check
         try:    # a discrete servo: the step split at its samples, each taken there
@@ -296,8 +298,8 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     the local error at once: the next step is checked (accuracy.py), not the one the
     schedule had come to."""
     before = commanded(sim)
-    sim.dynamics.command[0] = tau1
-    sim.dynamics.command[1] = tau2
+    sim.dynamics.given[0] = tau1      # under a control loop: its input (sensing/loop.py)
+    sim.dynamics.given[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
     if commanded(sim) != before:
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
@@ -306,16 +308,18 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
 def commanded(sim: Simulator) -> tuple:
     """The command and a servo's set-points, as the step reads them."""
     joint_servo = servo.servo_of(sim.dynamics)
-    return (*sim.dynamics.command, *(joint_servo.setpoint if joint_servo is not None else ()))
+    return (*sim.dynamics.given, *(joint_servo.setpoint if joint_servo is not None else ()))
 
 
 def steppers(sim: Simulator, scene: Scene) -> None:
     """What steps the simulator: the switching stepper (friction, limits, clamps: events.py),
     the compiled step and runs (compiled.py, extra `fast`), and the error books."""
     step = compiled.steps_for(sim.dynamics, sim._step)
+    sim.sensing = sensing.attach(sim, scene)   # readings and a control loop act between steps
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
-    sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver)
+    sim.kernel = None if sim.sensing is not None and sim.sensing.active else compiled.kernel_for(
+        sim.dynamics, sim._step, sim.switching or sim._driver)
     if sim.kernel is not None and sim.switching is not None and hasattr(step, "module"):
         sim.kernel.switched = Switched(step, sim._driver is not None)   # switch_run.py
     sim.path = getattr(step, "path", "python")
@@ -328,12 +332,12 @@ def steppers(sim: Simulator, scene: Scene) -> None:
 def books_for(sim: Simulator, scene: Scene, step):
     """The error books (accuracy.py) of `step` (the simulator's, compiled where it can be),
     with the shadow's own switching stepper where the scene switches (it says nothing: its
-    switches are not the run's)."""
-    twin = sim.switching and switching_for(sim.dynamics, sim._tableau, step, sim.substeps,
-                                           lambda kind, message: None, lambda: 0.0)
+    switches are not the run's; none with `estimate` off: no shadow)."""
+    twin = sim.switching and scene.estimate != "off" and switching_for(
+        sim.dynamics, sim._tableau, step, sim.substeps, lambda kind, message: None, lambda: 0.0)
     return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
-                         int(scene.max_substeps), 4 + len(sim.extra), twin)
+                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate)
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:
@@ -359,7 +363,22 @@ def sample(sim: Simulator) -> Sample:
                   kinetic=kinetic, potential=potential, work=channels.get("work", 0.0),
                   dissipated=channels.get("dissipated", 0.0), initial_energy=sim.initial_energy,
                   extra=dict(zip(sim.extra, y[4:4 + len(sim.extra)])),
-                  channels=channels, inputs=inputs, losses=losses)
+                  channels=channels, inputs=inputs, losses=losses,
+                  measured=sim.readings if sim.scene.sensors is not None else None)
+
+
+def readings(sim: Simulator) -> tuple:
+    """(q1, q2, q̇1, q̇2) as the sensors read them now (physics/sensing/): the state's own
+    without sensors that model something."""
+    return tuple(sim.state[:4]) if sim.sensing is None else sim.sensing.reading(sim)
+
+
+def recorded_row(sim) -> tuple:
+    """What a recording keeps of a step: the state; with sensors, the readings after it;
+    under a control loop (sensing/loop.py), the torque that acted over it."""
+    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
+    looped = sim.dynamics.command is not sim.dynamics.given
+    return row + tuple(sim.dynamics.command) if looped else row
 
 
 def check_divergence(sim: Simulator) -> None:

@@ -1,7 +1,8 @@
 """`--csv PATH`: one row per step of an offline run, every value as Python's repr (exact).
 
-Columns: t, the state (q1, q2, qd1, qd2 and any extra state such as the winding currents
-i1, i2), the joint torque, the energies, work and dissipated energy (0 where absent), every
+Columns: t, the state (q1, q2, qd1, qd2: the truth, and any extra state such as the winding
+currents i1, i2), with sensors the readings (q1_measured, q2_measured, qd1_measured,
+qd2_measured: physics/sensing/), the joint torque, the energies, work and dissipated energy (0 where absent), every
 other channel of the scene by name, the balance residual, and the simulator's error books
 after the step: error_estimate (the step's local error estimate) and accumulated_error
 (their sum since reset), both max over q, qd (rad, rad/s); nan where the simulator does
@@ -26,6 +27,7 @@ from ..usage import UsageError
 # A row, in CsvRecorder.step's order: the state (then any extra states), the torque and the
 # energies (then the scene's other channels), the residual and the error books.
 STATE_COLUMNS = ("t", "q1", "q2", "qd1", "qd2")
+MEASURED_COLUMNS = ("q1_measured", "q2_measured", "qd1_measured", "qd2_measured")   # sensors
 ENERGY_COLUMNS = ("tau1", "tau2", "kinetic", "potential", "total", "work", "dissipated")
 CLOSING_COLUMNS = ("residual", "error_estimate", "accumulated_error")
 CSV_COLUMNS = STATE_COLUMNS + ENERGY_COLUMNS + CLOSING_COLUMNS   # the bare arm's
@@ -44,7 +46,9 @@ def let_writes_fail_on_file_size_limit() -> None:
 def csv_columns(sim) -> tuple[str, ...]:
     """The scene's columns: CSV_COLUMNS with its extra states and other channels added."""
     others = tuple(c for c in sim.channels if c not in BOOKS)
-    return STATE_COLUMNS + tuple(sim.extra) + ENERGY_COLUMNS + others + CLOSING_COLUMNS
+    measured = MEASURED_COLUMNS if sim.scene.sensors is not None else ()
+    return (STATE_COLUMNS + tuple(sim.extra) + measured + ENERGY_COLUMNS + others
+            + CLOSING_COLUMNS)
 
 
 class CsvRecorder:
@@ -70,7 +74,8 @@ class CsvRecorder:
 
     def step(self, sim) -> None:
         s = sim.sample()
-        row = (s.t, *s.q, *s.qd, *s.extra.values(), *s.tau, s.kinetic, s.potential, s.total,
+        row = (s.t, *s.q, *s.qd, *s.extra.values(), *(s.measured or ()), *s.tau, s.kinetic,
+               s.potential, s.total,
                s.work, s.dissipated, *(s.channels[c] for c in self._others), s.residual,
                sim.error_estimate, sim.accumulated_error)
         self._writer.writerow([repr(v) for v in row])

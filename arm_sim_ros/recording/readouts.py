@@ -12,6 +12,11 @@ path (the names below; blueprint.py gives them series names, colours and places)
     books/<kind>/<channel>   every channel of the scene by name (kind: input, loss, transfer)
     joints/angle, joints/velocity, joints/torque (with a drive), joints/current (windings)
     joints/commanded_torque  the command held at each step (command policies)
+    joints/angle_measured, joints/velocity_measured   with sensors: as read (after the state)
+
+A row is the simulator's state, then with sensors the readings, then under a control loop
+the torque that acted over the step (physics/simulator.recorded_row), which the joint torque
+is evaluated with, as a command policy's with its command.
 
 With books/stored/* + inputs - losses the residual closes: Σ stored changes - Σ inputs +
 Σ losses = energy/balance_residual (transfer channels, e.g. the motors' work on the joints
@@ -26,12 +31,15 @@ import numpy as np
 from ..physics import model
 from ..physics.effects import Effect
 from ..physics.stepping.integrators import INTEGRATORS
+from ..physics.trust.unestimated import NO_ESTIMATE
 
 # Each effect's stored energy as a part of E: the part's name in the books.
 STORED_PARTS = {"gravity": "gravity", "springs": "springs", "motors": "windings"}
 KINDS = ("input", "loss", "transfer")
 CURRENTS = ("i1", "i2")           # the windings' extra states (A)
 COMMANDED = "joints/commanded_torque"
+MEASURED = {"joints/angle": "joints/angle_measured",        # with sensors: the readings
+            "joints/velocity": "joints/velocity_measured"}  # beside the truth
 # How far each step is from the exact flow (physics/trust/accuracy.py), and what it cost.
 LOCAL_ERROR = "accuracy/local_error"            # the step's estimate, max over q, q̇
 ACCUMULATED_ERROR = "accuracy/accumulated_error"  # their sum since reset
@@ -47,7 +55,10 @@ def stores_energy(effect) -> bool:
 
 def held_by(scene) -> str:
     """What holds a scene's local error: its tolerance (a scaled error per simulated
-    second), or for an embedded pair (dopri5) its rtol and atol."""
+    second), or for an embedded pair (dopri5) its rtol and atol; nothing where the scene's
+    estimate is off."""
+    if scene.estimate == "off":
+        return f"estimate off: {NO_ESTIMATE}"
     if INTEGRATORS[scene.integrator].adaptive:
         return f"rtol {scene.rtol:g}, atol {scene.atol:g} ({scene.integrator})"
     return (f"tolerance {scene.tolerance:g} per s (scaled: max |e_q|, |e_qd|/(1+|qd|))"
@@ -85,6 +96,8 @@ class Snapshot:
                             for e in dynamics.active if stores_energy(e))
         self.drives = any(e.drives for e in dynamics.active)
         self.commanded = sim.scene.policy.startswith("command")
+        self.measured = sim.scene.sensors is not None   # rows hold the readings (sensing/)
+        self.looped = dynamics.command is not dynamics.given   # ... and the acting torque
         self.arm3d = None         # the recorder's 3D arm (arm3d.Arm3D), when the URDF is this arm
         self.initial_energy = sim.initial_energy
         # (inputs, losses) booked by channels a live change removed (damping set to 0 ...)
@@ -117,7 +130,8 @@ class Snapshot:
     def key(self) -> tuple:
         """What the blueprint and the series' styles depend on."""
         return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
-                self.commanded, self.estimates, self.held_by, self.initial_energy)
+                self.commanded, self.estimates, self.held_by, self.initial_energy, self.measured,
+                self.looped)
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -186,6 +200,9 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     q̇1, q̇2, the extra states, the channels), named as the module's docstring says."""
     kinetic, stored = energies(snap, states)
     potential = sum(stored.values()) if stored else np.zeros_like(kinetic)
+    end = states.shape[1] - 2 * snap.looped        # under a control loop: its torque last
+    if snap.looped:
+        commands = states[:, end:]
     total = kinetic + potential
     books = {name: states[:, snap.first + i] for i, name in enumerate(snap.channels)}
     inputs, losses = snap.retired
@@ -202,6 +219,9 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     for name, kind in snap.kinds.items():
         values[channel_path(name, kind)] = books[name]
     values["joints/angle"], values["joints/velocity"] = states[:, 0:2], states[:, 2:4]
+    if snap.measured:
+        values[MEASURED["joints/angle"]] = states[:, end - 4:end - 2]
+        values[MEASURED["joints/velocity"]] = states[:, end - 2:end]
     if snap.drives:
         values["joints/torque"] = snap.joint_torque(states, commands)
     if snap.commanded:

@@ -5,9 +5,8 @@ import sys
 from dataclasses import replace as dataclass_replace
 from pathlib import Path
 
-from ..physics.scene import (Scene, SceneError, angle_warning, changed_values, load_scene,
-                             parse_value)
-from ..physics.urdf.read import read_urdf
+from ..physics.scene import Scene, SceneError, angle_warning, load_scene, parse_value
+from ..physics.urdf.read import changed_values, read_urdf
 
 
 def scene_from_args(args, note=None) -> Scene:
@@ -24,9 +23,11 @@ def scene_from_args(args, note=None) -> Scene:
         scene = dataclass_replace(on_urdf, name=f"{scene.name} on {Path(args.urdf).name}")
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
-    for key in ("tolerance", "max_substeps"):
-        if getattr(args, key, None) is not None:
-            scene = scene.replace(**{key: parse_value(key, getattr(args, key))})
+    overrides = {key: parse_value(key, getattr(args, key)) for key in ("tolerance", "max_substeps")
+                 if getattr(args, key, None) is not None}
+    if getattr(args, "estimate", None) is not None:   # off alone: tolerance 0 (Scene.replace)
+        overrides["estimate"] = args.estimate
+    scene = scene.replace(**overrides)
     scene = scene.with_text_overrides(getattr(args, "set", None) or [])
     warning = angle_warning(scene)
     if warning:

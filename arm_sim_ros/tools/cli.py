@@ -14,6 +14,7 @@ import time
 
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
+from ..physics.trust.unestimated import ESTIMATES
 from ..recording.csv_file import CsvRecorder
 from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
@@ -143,6 +144,8 @@ def cmd_run(args) -> int:
                                        # NaN where the steps are not estimated: JSON's null
                                        "error_estimate": sim.error_estimate,
                                        "accumulated_error": sim.accumulated_error,
+                                       # global, or off: the run carries no error estimate
+                                       "estimate": scene.estimate,
                                        "interrupted_at": sim.time if stop.requested else None,
                                        "path": sim.path}   # compiled (numba) or python
     for event in sim.events:  # sub-stepping chosen, steps refused: say what was done
@@ -173,6 +176,10 @@ def format_result(scene: Scene, r: dict) -> str:
     def estimate(v):      # NaN: the scene's steps are not estimated
         return "n/a" if v != v else f"{v:.3e}"
 
+    books = (f"error estimate: none ({held_by(scene)})" if r["estimate"] == "off" else
+             f"error estimate: latest step {estimate(r['error_estimate'])}, accumulated "
+             f"{estimate(r['accumulated_error'])} (rad, rad/s: max over q, qd); {held_by(scene)}")
+
     currents = [f"{name} = {r[name]:.6f} A" for name in ("i1", "i2") if name in r]
     others = [f"{name} {value:.9f} J" for name, value in r["channels"].items()
               if name not in ("work", "dissipated")]
@@ -188,8 +195,7 @@ def format_result(scene: Scene, r: dict) -> str:
         *([", ".join(others)] if others else []),
         f"balance residual {r['residual']:.3e} J, max |residual| over the run "
         f"{r['max_abs_energy_drift']:.9f} J",
-        f"error estimate: latest step {estimate(r['error_estimate'])}, accumulated "
-        f"{estimate(r['accumulated_error'])} (rad, rad/s: max over q, qd); {held_by(scene)}",
+        books,
     ])
 
 
@@ -200,6 +206,9 @@ def build_parser() -> ArgumentParser:
     run = sub.add_parser("run", help="run a scene offline and print the final state and energy")
     add_scene_arguments(run)
     run.add_argument("--duration", help="seconds of simulated time (default: the scene's)")
+    run.add_argument("--estimate", choices=ESTIMATES,
+                     help="global: the error estimate (the default); off: none, and so no "
+                          "tolerance (sets it to 0): the steps alone, cheaper")
     run.add_argument("--json", action="store_true", help="print one JSON object")
     run.add_argument("--csv", metavar="PATH", help="write one row per step")
     run.add_argument("--rerun", metavar="PATH", help="write a Rerun recording (.rrd)")

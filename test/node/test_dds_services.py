@@ -40,7 +40,7 @@ from arm_sim_ros.node.services.simulation import SERVICES as SIMULATION_SERVICES
 from arm_sim_ros.node.transports.dds_action import SERVICES as ACTION_SERVICES
 from arm_sim_ros.node.transports.dds_action import TYPE_HASHES as ACTION_HASHES
 from arm_sim_ros.node.transports.dds_simulation import TYPE_HASHES as SIMULATION_HASHES
-from arm_sim_ros.physics.effects import MAPPING_EFFECTS
+from arm_sim_ros.physics.scene import MAPPINGS
 from node.test_node_dds import CONFIG, TIMEOUT, start as start_node, wait_until
 
 U64 = (1 << 64) - 1
@@ -147,7 +147,7 @@ def test_list_get_types_and_describe_answer_as_rclpy_does():
         p, "list_parameters", "get_parameters", "get_parameter_types", "describe_parameters")
     result = lister.call(node, prefixes=[], depth=0).result
     assert result.names == [spec.name for spec in PARAMETERS]
-    assert result.prefixes == list(MAPPING_EFFECTS)        # friction.coulomb... as rclpy lists them
+    assert result.prefixes == list(MAPPINGS)        # friction.coulomb... as rclpy lists them
     assert lister.call(node, prefixes=["damping"], depth=0).result.names == ["damping"]
     assert lister.call(node, prefixes=["friction"], depth=0).result.names == [
         "friction.coulomb", "friction.static", "friction.stribeck_velocity"]

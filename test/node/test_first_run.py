@@ -61,9 +61,9 @@ def test_faults_still_warn(overrides, kinds):
 def test_each_kind_of_event_has_one_level_for_every_listener():
     """The node's log, a recording's text log and arm-sim run read the level from the event."""
     assert {kind: Event(0.0, kind, "").level for kind in (
-        "switch", "tolerance", "unpredictable", "substepping", "accuracy", "saturation",
+        "switch", "substeps", "unpredictable", "substepping", "accuracy", "saturation",
         "servo", "books", "fault")} == {
-        "switch": "info", "tolerance": "info", "unpredictable": "info",
+        "switch": "info", "substeps": "info", "unpredictable": "info",
         "substepping": "warning", "accuracy": "warning", "saturation": "warning",
         "servo": "warning", "books": "error", "fault": "error"}
     assert set(LEVELS.values()) == {"info", "error"}

@@ -216,8 +216,10 @@ def test_the_ros2_control_launch_builds_each_controller_where_ros_is_installed(t
     (opaque,) = [e for e in description.entities if isinstance(e, OpaqueFunction)]
     for choice, (controller, _) in module.CONTROLLERS.items():
         context.launch_configurations["controller"] = choice
-        node, spawner = opaque.execute(context)
-        assert spawner.node_package == "controller_manager" and node.node_package == "arm_sim_ros"
-    context.launch_configurations["controller"] = "velocity"
-    with pytest.raises(ValueError, match="controller:=velocity is not one of"):
+        node, waiter, handler = opaque.execute(context)
+        assert node.node_package == waiter.node_package == "arm_sim_ros"
+        assert waiter.node_executable == "arm_sim_controllers"
+        assert handler.__class__.__name__ == "RegisterEventHandler"
+    context.launch_configurations["controller"] = "torque"
+    with pytest.raises(ValueError, match="controller:=torque is not one of"):
         opaque.execute(context)

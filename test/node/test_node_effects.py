@@ -15,7 +15,7 @@ from arm_sim_ros.node.params.parameters import (EFFECT_PARAMETERS, LIVE, START_O
                                                 ParameterRefused, resolve_parameters)
 from arm_sim_ros.node.params.ros_args import load_params_file
 from arm_sim_ros.physics import model
-from arm_sim_ros.physics.effects import MAPPING_EFFECTS
+from arm_sim_ros.physics.scene import MAPPINGS
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -123,14 +123,24 @@ def test_a_nan_effort_does_not_hide_what_else_is_wrong_with_the_command(names, e
     assert core.refused_commands == 1 and core.command == (0.0, 0.0)
 
 
+def test_a_position_or_velocity_for_a_torque_driven_joint_is_ignored():
+    """What ros2_control's topic-based hardware sends for every interface of every joint:
+    an effort joint takes the effort and ignores the rest, refusing none of it."""
+    core = make_core(scene="release", policy="command")
+    assert core.on_joint_state_command(["shoulder_joint"], [0.3], [1e9], []) is None
+    assert core.refused_commands == 0 and core.command == (0.0, 0.0)
+    assert core.on_joint_state_command(["shoulder_joint"], [0.3], [0.0], [2.0]) is None
+    assert core.command == (2.0, 0.0)
+
+
 @pytest.mark.parametrize("names, position, velocity, effort, reason", [
-    (["shoulder_joint"], [0.3], [], [], "the node is torque-driven"),
+    (["shoulder_joint"], [], [], [], "it carries no position, velocity or effort"),
     (["wrist_joint"], [], [], [1.0], "unknown joint 'wrist_joint'"),
     (["shoulder_joint", "elbow_joint"], [], [], [1.0], "2 names but 1 efforts"),
     (["shoulder_joint", "shoulder_joint"], [], [], [1.0, 2.0], "named twice"),
     (["shoulder_joint"], [], [], [float("inf")], "not finite"),   # NaN: unset (above)
 ])
-def test_a_joint_state_command_that_is_not_a_torque_command_is_refused_and_counted(
+def test_a_malformed_joint_state_command_is_refused_and_counted(
         names, position, velocity, effort, reason):
     core = make_core(scene="release", policy="command")
     assert reason in core.on_joint_state_command(names, position, velocity, effort)
@@ -169,8 +179,13 @@ AT_START = {
 COMPLIANT = {"joint_limits.lower": [-0.5, -2.5], "joint_limits.upper": [0.5, 2.5],
              "joint_limits.stiffness": 500.0, "joint_limits.damping": 2.0}
 SERVO = {"servo.interface": ["position", "velocity"], "servo.kp": [200.0, 20.0],
-         "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 0.0], "servo.integral_limit": [20.0, 5.0],
+         "servo.ki": [100.0, 10.0], "servo.kd": [30.0, 8.0], "servo.integral_limit": [20.0, 5.0],
+         "servo.velocity_kp": [25.0, 15.0], "servo.velocity_ki": [90.0, 12.0],
          "servo.tracking": [2.0, 1.0], "servo.rate": 1000.0}
+SENSED = {"sensors.seed": 7.0, "sensors.rate": 500.0, "sensors.position_resolution": [1e-3, 1e-3],
+          "sensors.position_noise": [1e-4, 1e-4], "sensors.position_offset": [0.01, 0.0],
+          "sensors.velocity": "differences", "sensors.velocity_noise": None,
+          "sensors.delay": 0.002}     # test/node/test_sensors_node.py runs them
 POLICY = {"hard_limits": "gravity_compensation", "compliant_limits": "gravity_compensation",
           "servo": "command_gravity_compensation"}
 
@@ -190,12 +205,13 @@ def scene_text(values: dict) -> str:
 
 
 def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_names_it():
-    keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPING_EFFECTS.items()
+    keys = {"effort_limits"} | {f"{effect}.{p.name}" for effect, kind in MAPPINGS.items()
                                 for p in kind.parameters}
     assert ({spec.name for spec in EFFECT_PARAMETERS} == keys
-            == set(AT_START) | set(COMPLIANT) | set(SERVO))
-    # double, double[], string[] (the servo's interface names)
-    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list"}
+            == set(AT_START) | set(COMPLIANT) | set(SERVO) | set(SENSED))
+    # double, double[], string[] (the servo's interface names), string (sensors.velocity)
+    assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list",
+                                                         "str"}
 
 
 @pytest.mark.parametrize("values", [AT_START, COMPLIANT, SERVO],
@@ -252,9 +268,10 @@ def test_a_ros2_param_dump_with_keys_not_set_starts_the_node_again(tmp_path):
 
 def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_is_start_only():
     names = {spec.name for spec in EFFECT_PARAMETERS}
-    live = {"effort_limits", "friction", "controller_model", "payload", "servo"}
+    live = {"effort_limits", "friction", "controller_model", "payload", "servo", "sensors"}
     assert {n.partition(".")[0] for n in names & set(LIVE)} == live
-    assert set(LIVE) == {"damping"} | {n for n in names if n.partition(".")[0] in live}
+    assert set(LIVE) == {"damping", "command_delay"} | {n for n in names
+                                                        if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
                                "joint_commands_topic"} | (names - set(LIVE))
 

@@ -23,8 +23,17 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from builtin_interfaces.msg import Time  # noqa: E402
+from hypothesis import assume, given, settings, strategies as st  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+
+from arm_sim_ros.interface import split_stamp  # noqa: E402
+from arm_sim_ros.node.diagnostics import JointStateData  # noqa: E402
 from arm_sim_ros.node.params import parameters as node_params  # noqa: E402
+from arm_sim_ros.node.transports import rclpy_transport  # noqa: E402
 from arm_sim_ros.node.transports.rclpy_transport import ArmSimNode  # noqa: E402
+from arm_sim_ros.node.wire.cdr import clock_cdr, joint_state_bytes  # noqa: E402
 from node.node_oracle import assert_matches, expected_states  # noqa: E402
 
 TIMEOUT = 5.0
@@ -116,6 +125,48 @@ def test_joint_states_match_the_core_stepped_with_the_same_held_commands(ros):
     assert list(received[0].name) == ["shoulder_joint", "elbow_joint"]
     stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in received]
     assert {b - a for a, b in zip(stamps, stamps[1:])} == {10_000_000}
+
+
+@pytest.mark.parametrize("ros", [27], indirect=True)
+def test_on_rmw_cyclonedds_the_node_publishes_the_bytes_and_a_message_gives_the_same(ros):
+    """The JointState and Clock go out as the bytes cdr.py writes (the RMW serializes a
+    message to the same bytes: rmw_writes_our_cdr); as messages, the same JointStates."""
+    make_node, peer = ros
+    assert rclpy_transport.rmw_writes_our_cdr()
+    schedule = [(1.0, -0.5)] + [None] * 4 + [(0.0, 2.0)] + [None] * 4
+    node = make_node(step_size=0.001, publish_rate=100.0)
+    assert node.serialized
+    node.serialized = False          # what an RMW that serializes otherwise gets
+    received = run_ticks(node, peer, schedule)
+    assert_matches(received, expected_states(node.core.config.scene, schedule, 10))
+
+
+names = st.lists(st.text(max_size=12), max_size=4)
+doubles = st.lists(st.floats(allow_nan=False, width=64), max_size=4)
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(stamp_ns=st.integers(0, 2**31 * 10**9 - 1), frame_id=st.text(max_size=9), name=names,
+       position=doubles, velocity=doubles, effort=doubles)
+def test_the_rmw_serializes_a_joint_state_and_a_clock_to_the_bytes_the_node_writes(
+        stamp_ns, frame_id, name, position, velocity, effort):
+    """Every stamp a Time holds; any strings but those with a NUL, which the RMW cuts short
+    (the node publishes those as messages: the next test)."""
+    assume("\0" not in frame_id + "".join(name))
+    data = JointStateData(stamp_ns, frame_id, name, position, velocity, effort)
+    sec, nanosec = split_stamp(stamp_ns)
+    assert (serialize_message(rclpy_transport.to_joint_state(data))
+            == joint_state_bytes(sec, nanosec, frame_id, name, position, velocity, effort))
+    assert serialize_message(Clock(clock=Time(sec=sec, nanosec=nanosec))) == clock_cdr(sec,
+                                                                                       nanosec)
+
+
+@pytest.mark.parametrize("ros", [28], indirect=True)
+def test_a_name_with_a_nul_goes_out_as_a_message_as_the_rmw_cuts_it(ros):
+    make_node, peer = ros
+    node = make_node(step_size=0.001, publish_rate=100.0, joint_names=["shoulder\0x", "elbow"])
+    received = run_ticks(node, peer, [None])
+    assert list(received[0].name) == ["shoulder", "elbow"]
 
 
 @pytest.mark.parametrize("ros", [22], indirect=True)
@@ -239,3 +290,30 @@ def test_a_set_the_core_cannot_apply_is_refused_and_the_node_goes_on(ros, monkey
     assert node.set_parameters([Parameter("damping", value=0.3)])[0].successful
     node.on_tick()
     peer.spin_until(lambda: peer.joint_states)
+
+
+@pytest.mark.parametrize("ros", [165], indirect=True)
+def test_sensors_readings_and_truth_are_the_offline_simulators_bit_for_bit(ros):
+    """/joint_states carries the readings, /arm_sim/true_joint_states the truth, same stamps,
+    equal to what the offline simulator reads after each tick (as on dds)."""
+    from node.test_sensors_node import SENSORS, offline
+
+    make_node, peer = ros
+    truths = []
+    peer.node.create_subscription(JointState, "/arm_sim/true_joint_states", truths.append, 1000)
+    node = make_node(**(SENSORS | {"publish_rate": 250.0, "step_size": 0.001,
+                                   "policy": "command_gravity_compensation"}))
+    node.on_tick()                        # the truth's publisher comes with the first truth
+    peer.spin_until(lambda: peer.node.count_publishers("/arm_sim/true_joint_states") > 0)
+    peer.send(node, (0.5, -0.2))
+    for _ in range(39):
+        node.on_tick()
+    peer.spin_until(lambda: len(peer.joint_states) >= 40 and truths and
+                    truths[-1].header.stamp == peer.joint_states[-1].header.stamp)
+    expected = offline(node.core, 40, commands={1: (0.5, -0.2)})
+    assert [list(m.position) + list(m.velocity) for m in peer.joint_states] == [
+        r for r, _ in expected]
+    first = 40 - len(truths)
+    assert [list(m.position) + list(m.velocity) for m in truths] == [
+        s for _, s in expected[first:]]
+    assert [m.header.stamp for m in truths] == [m.header.stamp for m in peer.joint_states[first:]]

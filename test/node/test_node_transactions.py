@@ -17,7 +17,8 @@ import pytest
 
 from arm_sim_ros.node import core as node_core
 from arm_sim_ros.node.params import parameters as node_params
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from node.test_node_dds import FakeClock
 
 LOG = logging.getLogger("transactions")

@@ -23,7 +23,9 @@ from arm_sim_ros.interface import JOINT_NAMES, NODE_NAME
 from arm_sim_ros.node.wire import messages as msg
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import SPECS, resolve_parameters
+from arm_sim_ros.node.transports import TRANSPORTS
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
+from node.ros2_control_loop import Core, Manager, TrajectoryController
 from node.test_node_dds import CONFIG, TIMEOUT, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -82,9 +84,12 @@ def test_the_controllers_drive_both_joints_at_the_nodes_rate():
         "joint_state_broadcaster": "joint_state_broadcaster/JointStateBroadcaster",
         "position_trajectory_controller": "joint_trajectory_controller/JointTrajectoryController",
         "effort_trajectory_controller": "joint_trajectory_controller/JointTrajectoryController",
-        "forward_effort_controller": "forward_command_controller/ForwardCommandController"}
-    forward = CONTROLLERS["forward_effort_controller"]["ros__parameters"]
-    assert forward["joints"] == list(JOINT_NAMES) and forward["interface_name"] == "effort"
+        "forward_effort_controller": "forward_command_controller/ForwardCommandController",
+        "forward_velocity_controller": "forward_command_controller/ForwardCommandController"}
+    for name, interface in (("forward_effort_controller", "effort"),
+                            ("forward_velocity_controller", "velocity")):
+        forward = CONTROLLERS[name]["ros__parameters"]
+        assert forward["joints"] == list(JOINT_NAMES) and forward["interface_name"] == interface
 
 
 @pytest.mark.parametrize("name, interfaces", [
@@ -105,38 +110,28 @@ def test_each_trajectory_controller_names_its_interfaces_and_goal_tolerances(nam
 
 def follow(controller, policy, target=(0.8, -0.4), duration=2.0):
     """A JointTrajectoryController as controller_manager runs it at update_rate against the
-    node (its topic-based hardware: a JointState command per cycle, the state read before):
-    a smooth-step trajectory to `target`, then goal_time more. (largest deviation from the
-    reference, final error, largest |effort| commanded)."""
+    node (ros2_control_loop.py: a JointState command per cycle, the state read before): the
+    guide's goal to `target`, then goal_time more. (largest deviation from the reference,
+    final error, largest |effort| commanded)."""
     config = CONTROLLERS[controller]["ros__parameters"]
-    interface = config["command_interfaces"][0]
     core = ArmSimCore(resolve_parameters({"scene": "servo_hold", "policy": policy,
-                                          "servo.interface": [interface] * 2}),
+                                          "servo.interface": [config["command_interfaces"][0]]
+                                          * 2}),
                       logging.getLogger("test_ros2_control"), wall_clock=lambda: 0.0,
                       start_stamp_ns=0)
     dt = 1.0 / CONTROLLERS["controller_manager"]["ros__parameters"]["update_rate"]
-    start, integral, deviation, peak = core.sim.state[0:2], [0.0, 0.0], 0.0, 0.0
-    nan = float("nan")
-    for k in range(round((duration + config["constraints"]["goal_time"]) / dt)):
-        s = min(k * dt / duration, 1.0)
-        reference = [a + (b - a) * (3 * s * s - 2 * s ** 3) for a, b in zip(start, target)]
-        rate = [(b - a) * (6 * s - 6 * s * s) / duration for a, b in zip(start, target)]
-        state = core.sim.state
-        if interface == "effort":              # its PID: p e + i ∫e (clamped) + d ė
-            effort = []
-            for j, joint in enumerate(JOINT_NAMES):
-                gains, error = config["gains"][joint], reference[j] - state[j]
-                integral[j] += error * dt
-                held = min(max(gains["i"] * integral[j], gains["i_clamp_min"]),
-                           gains["i_clamp_max"])
-                effort.append(gains["p"] * error + gains["d"] * (rate[j] - state[2 + j]) + held)
-            peak = max(peak, *map(abs, effort))
-            command = ([nan, nan], [nan, nan], effort)
-        else:
-            command = (reference, rate, [nan, nan])
-        assert core.on_joint_state_command(list(JOINT_NAMES), *command) is None
-        core.tick(0.0)
-        deviation = max(deviation, *(abs(r - q) for r, q in zip(reference, core.sim.state)))
+    trajectory = TrajectoryController(controller, config, dt)
+    manager = Manager(Core(core), {controller: trajectory})
+    manager.switch(controller)
+    manager.cycle()
+    trajectory.goal(target, duration)
+    deviation = peak = 0.0
+    for _ in range(round((duration + config["constraints"]["goal_time"]) / dt)):
+        manager.cycle()
+        deviation = max(deviation, *(abs(r - q) for r, q in zip(trajectory.reference()[0],
+                                                                  core.sim.state)))
+        if trajectory.interface == "effort":
+            peak = max(peak, *(abs(manager.commands[(j, "effort")]) for j in JOINT_NAMES))
     return deviation, max(abs(q - t) for q, t in zip(core.sim.state, target)), peak
 
 
@@ -176,22 +171,71 @@ def test_the_launch_files_node_parameters_are_the_nodes():
 
 
 def test_the_launch_picks_a_controller_the_config_carries_and_the_interface_it_claims():
-    namespace = {}
-    exec(compile(ast.Module([n for n in LAUNCH.body if isinstance(n, ast.Assign)], []),
-                 "launch", "exec"), namespace)
+    namespace = launch_constants()
     for choice, (controller, interface) in namespace["CONTROLLERS"].items():
         claimed = CONTROLLERS[controller]["ros__parameters"]
         assert interface == claimed.get("interface_name", claimed.get("command_interfaces",
                                                                       [None])[0])
     arguments = {call.args[0].value: call for call in ast.walk(LAUNCH) if isinstance(call, ast.Call)
                  and getattr(call.func, "id", "") == "DeclareLaunchArgument"}
-    assert set(arguments) == {"scene", "policy", "controller", "use_sim_time", "lockstep", "rviz"}
+    assert set(arguments) == {"scene", "policy", "controller", "use_sim_time", "lockstep", "rviz",
+                              "transport"}
     defaults = {name: next(k.value.value for k in call.keywords if k.arg == "default_value")
                 for name, call in arguments.items()}
     assert defaults["controller"] in namespace["CONTROLLERS"]
+    assert defaults["transport"] in ("auto",) + TRANSPORTS       # arm_sim_node --transport
     # the arm starts held: the default scene's servos hold its initial pose
     config = resolve_parameters({"scene": defaults["scene"], "policy": defaults["policy"]})
     assert config.scene.servo is not None
+
+
+def launch_constants():
+    namespace = {}
+    exec(compile(ast.Module([n for n in LAUNCH.body if isinstance(n, ast.Assign)], []),
+                 "launch", "exec"), namespace)
+    return namespace
+
+
+def test_the_launch_loads_every_controller_of_the_config_one_active_the_others_inactive():
+    """So that `ros2 control switch_controllers` finds each one ready to activate."""
+    manager = CONTROLLERS["controller_manager"]["ros__parameters"]
+    configured = {name for name in manager if isinstance(manager[name], dict)}
+    offered = {controller for controller, _ in launch_constants()["CONTROLLERS"].values()}
+    assert offered == configured - {"joint_state_broadcaster"}
+    source = ast.unparse(launch_function("controlled"))
+    assert "'--inactive'" in source and "if name != controller" in source
+
+
+def test_the_controllers_start_once_the_hardware_has_read_the_nodes_state():
+    """A controller activated before the hardware's first read holds NaN (a JTC's state
+    showed NaN until its first goal): the spawners run when `arm_sim_controllers wait` ends
+    well, which it does once the joint_state_broadcaster publishes a finite state."""
+    function = launch_function("controlled")
+    (handler,) = [n for n in ast.walk(function) if isinstance(n, ast.Call)
+                  and getattr(n.func, "id", "") == "OnProcessExit"]
+    keywords = {k.arg: ast.unparse(k.value) for k in handler.keywords}
+    assert keywords == {"target_action": "waiter", "on_exit": "started"}
+    (started,) = [n for n in ast.walk(function) if isinstance(n, ast.FunctionDef)
+                  and n.name == "started"]
+    assert "event.returncode == 0" in ast.unparse(started)
+    (waiter,) = [n for n in ast.walk(function) if isinstance(n, ast.Assign)
+                 and ast.unparse(n.targets[0]) == "waiter"]
+    assert "executable='arm_sim_controllers'" in ast.unparse(waiter)
+    assert "arguments=['wait']" in ast.unparse(waiter)
+
+
+def test_the_launch_follows_every_switch_into_servo_interface():
+    (follower,) = [n for n in ast.walk(LAUNCH) if isinstance(n, ast.Call) and any(
+        k.arg == "executable" and getattr(k.value, "value", None) == "arm_sim_controllers"
+        for k in n.keywords) and "follow" in ast.unparse(n)]
+    assert "'follow'" in ast.unparse(follower)
+
+
+def test_the_launch_needs_no_lockstep_wait_of_its_own():
+    """The node's default waits while a node listens on /clock: a launch written without it
+    does not deadlock with controller_manager under use_sim_time."""
+    assert "lockstep_wait" not in ast.unparse(launch_function("controlled"))
+    assert SPECS["lockstep_wait"].default > 0
 
 
 def test_controller_manager_gets_no_robot_description_parameter():

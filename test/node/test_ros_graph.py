@@ -14,8 +14,9 @@ from rosbags.typesys import Stores, get_typestore
 from arm_sim_ros.interface import OK
 from arm_sim_ros.node.wire import messages as msg
 from arm_sim_ros.node.core import ArmSimCore
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
-from arm_sim_ros.node.schedule import TickSchedule
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
+from arm_sim_ros.node.schedule import STATE_BEFORE_CLOCK, TickSchedule
 from arm_sim_ros.node.transports.dds import DdsArmSimNode
 from node.test_node_dds import CONFIG, TIMEOUT, FakeClock, Peer, start, wait_until
 
@@ -79,7 +80,10 @@ def test_joint_state_effort_commands_drive_the_arm_by_joint_name():
     writer.write(effort_command(["elbow_joint", "shoulder_joint"], [0.25, 1.0]))
     assert node.take_commands(timeout=TIMEOUT) == 1
     assert node.core.command == (1.0, 0.25)
-    writer.write(msg.JointState(name=["shoulder_joint"], position=[0.3]))   # not torque
+    writer.write(msg.JointState(name=["shoulder_joint"], position=[0.3]))   # ignored: effort
+    assert node.take_commands(timeout=TIMEOUT) == 1
+    assert node.core.refused_commands == 0 and node.core.command == (1.0, 0.25)
+    writer.write(msg.JointState(name=["shoulder_joint"], effort=[80.0]))    # beyond the limit
     assert node.take_commands(timeout=TIMEOUT) == 1
     assert node.core.refused_commands == 1 and node.core.command == (1.0, 0.25)
 
@@ -114,21 +118,45 @@ def test_lockstep_ticks_are_never_late_however_far_apart_the_commands_come():
 
 def test_lockstep_wait_ticks_on_its_own_only_once_no_tick_came_for_that_long():
     """controller_manager under use_sim_time sends nothing until /clock has moved (and a
-    period more): a lockstep node that only waited would deadlock with it."""
+    period more): a lockstep node that only waited would deadlock with it. The default wait
+    is not zero, so no launch has to know of it; it runs while a node listens on /clock."""
     clock = FakeClock()
-    core = lockstep_core(clock, lockstep_wait=0.1)
-    assert core.tick() is not None and core.sim.time == pytest.approx(0.01)   # at start
+    core = lockstep_core(clock)
+    assert core.config.values["lockstep_wait"] == 0.1
+    listened = dict(clock_listened=True)
+    assert core.tick(**listened) is not None and core.sim.time == pytest.approx(0.01)  # start
     clock.now += 0.09
-    assert core.tick() is None
+    assert core.tick(**listened) is None
     clock.now += 0.01
-    assert core.tick() is not None and core.sim.time == pytest.approx(0.02)   # 0.1 s later
+    assert core.tick(**listened) is not None and core.sim.time == pytest.approx(0.02)  # 0.1 s
     clock.now += 0.05
     core.on_command([0.5, 0.0])                 # a command ticks, and the wait starts again
     clock.now += 0.09
+    assert core.tick(**listened) is None and core.sim.time == pytest.approx(0.03)
+    clock.now += 1e6                            # nobody on /clock: commands only
     assert core.tick() is None and core.sim.time == pytest.approx(0.03)
-    never = lockstep_core(clock)                # 0, the default: commands only
+    never = lockstep_core(clock, lockstep_wait=0.0)     # 0: commands only, listened or not
     clock.now += 1e6
-    assert never.tick() is None and never.sim.steps == 0
+    assert never.tick(**listened) is None and never.sim.steps == 0
+
+
+def test_a_lockstep_tick_writes_its_joint_state_a_moment_before_its_clock():
+    """controller_manager wakes on /clock and reads the latest JointState its hardware has
+    taken (another thread): written together, it often read the tick before."""
+    node, peer = start(149, policy="command", lockstep=True, lockstep_wait=0.0)
+    clock = clock_reader(node, peer)
+    for _ in range(3):
+        peer.send(node, [0.5, 0.0])
+    states = peer.read(peer.joint_states, 3, msg.JointState)
+    clocks = [c for c in peer.read(clock, 3, msg.Clock) if stamp_of(c) > 5_000_000_000]
+    assert [stamp_of(c) for c in clocks] == [stamp(s) for s in states]
+    for state, tick in zip(states, clocks):
+        ahead = tick.sample_info.source_timestamp - state.sample_info.source_timestamp
+        assert ahead >= 0.9e9 * STATE_BEFORE_CLOCK > 0
+
+
+def stamp_of(clock) -> int:
+    return clock.clock.sec * 10**9 + clock.clock.nanosec
 
 
 def test_an_all_nan_joint_state_ticks_a_lockstep_node_and_commands_nothing():

@@ -159,7 +159,7 @@ def test_states_the_node_cannot_take_are_refused_with_the_packages_codes(target,
 def test_lockstep_publishes_the_clock_while_it_waits_for_the_first_command():
     """controller_manager under use_sim_time waits for /clock before it sends a command; a
     lockstep node that waited for a command first would deadlock with it."""
-    node, peer = start(203, lockstep=True, real_time_factor=0.0)
+    node, peer = start(203, lockstep=True, lockstep_wait=0.0, real_time_factor=0.0)
     _, clock = readers(peer)
     wait_until(lambda: msg.matched(node.clock_writer), "/clock reader not matched")
     spinning = threading.Thread(target=node.spin, kwargs={"duration_s": 0.02})
@@ -179,9 +179,9 @@ def test_lockstep_publishes_the_clock_while_it_waits_for_the_first_command():
 def test_lockstep_runs_with_a_controller_that_waits_for_the_clock_to_move():
     """controller_manager (Jazzy, ros2_control_node) under use_sim_time: it waits for a
     non-zero time, sleeps one period of it, then commands once per period of /clock. With
-    lockstep_wait the node ticks on its own until the commands come, then one per command."""
-    node, peer = start(204, clock=time.monotonic, lockstep=True, lockstep_wait=0.05,
-                       real_time_factor=0.0)
+    lockstep_wait (its default: no launch has to set it) the node ticks on its own while a
+    node listens on /clock, until the commands come, then one per command."""
+    node, peer = start(204, clock=time.monotonic, lockstep=True, real_time_factor=0.0)
     _, clock = readers(peer)
     commands = DataWriter(peer, Topic(peer, "rt/joint_torque_commands", msg.Float64MultiArray),
                           qos=msg.default_qos(msg.Float64MultiArray))
@@ -205,7 +205,7 @@ def test_lockstep_runs_with_a_controller_that_waits_for_the_clock_to_move():
         time.sleep(0.001)
     spinning.join(TIMEOUT)
     assert not spinning.is_alive() and node.core.sim.time >= 0.5 - 1e-9
-    assert sent >= 30                   # the commands ticked it, not the wait (50 ms each)
+    assert sent >= 30                   # the commands ticked it, not the wait (0.1 s each)
 
 
 def read_at_least(reader, kind, count):

@@ -55,6 +55,29 @@ def test_a_velocity_set_point_is_held_within_a_milliradian_per_second_in_steady_
     assert worst < 1e-3
 
 
+def test_a_velocity_joint_takes_its_own_gains_and_never_kd():
+    """velocity_kp and velocity_ki on velocity joints (kp and ki where not given); a position
+    joint keeps kp, ki and kd; a velocity joint never acts on kd (it would act on the
+    acceleration its torque causes), so one scene's gains serve either interface."""
+    gains = GAINS | {"velocity_kp": [30.0, 10.0], "velocity_ki": [200.0, 100.0]}
+    both = servo_of(Simulator(reach(servo=gains | {"interface": ["velocity", "position"]}))
+                    .dynamics)
+    assert (both.kp, both.ki, both.kd) == ((30.0, 100.0), (200.0, 150.0), (0.0, 10.0))
+    assert both.tracking == (200.0 / 30.0, 150.0 / 100.0)
+    plain = servo_of(Simulator(reach(servo=GAINS | {"interface": ["velocity", "velocity"]}))
+                     .dynamics)
+    assert (plain.kp, plain.ki, plain.kd) == ((200.0, 100.0), (300.0, 150.0), (0.0, 0.0))
+    # the same law as a velocity PI without kd: a scene with kd set turns just as one without
+    runs = []
+    for kd in ([30.0, 10.0], [0.0, 0.0]):
+        sim = Simulator(reach(policy="command_gravity_compensation", servo=gains | {
+            "interface": ["velocity", "velocity"], "kd": kd}))
+        servo_of(sim.dynamics).setpoint[2] = 0.5
+        sim.run(1.0)
+        runs.append(sim.state)
+    assert runs[0] == runs[1] and abs(runs[0][2] - 0.5) < 1e-2     # turning at 0.5 rad/s
+
+
 def overshoot_under_effort_limits(tracking):
     """(peak shoulder torque, peak integral, overshoot) reaching 0.5 rad against 25 N m."""
     sim = Simulator(reach(effort_limits=(25.0, 20.0), servo=GAINS | {"tracking": tracking}))
@@ -134,8 +157,8 @@ def test_switching_interface_live_is_bumpless(switch):
 @pytest.mark.parametrize("scene, message", [
     (dict(policy="setpoint"), "policy setpoint needs a servo"),
     (dict(policy="gravity_compensation", servo=GAINS), "servo needs policy"),
-    (dict(policy="setpoint", servo={"interface": ["velocity", "position"], "kp": [1, 1],
-                                    "kd": [1, 0]}), "servo.kd[0] = 1 on a velocity joint"),
+    (dict(policy="setpoint", servo={"kp": [1, 1], "velocity_kp": [1, -1]}),
+     "servo.velocity_kp[1] = -1 is impossible"),
     (dict(policy="setpoint", servo={"interface": ["torque", "position"], "kp": [1, 1]}),
      "servo.interface[0] = 'torque' is not one of position, velocity, effort"),
     (dict(policy="setpoint", servo={"interface": "position", "kp": [1, 1]}),

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from arm_sim_ros.interface import JOINT_NAMES
-from arm_sim_ros.node.params.parameters import SPECS, ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import SPECS, resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.physics.model import (ArmParameters, gravity_torque, link_points, mass_matrix,
                                        potential_energy)
 from arm_sim_ros.physics.model import MAX_ANGLE

@@ -93,6 +93,8 @@ def environment(scratch: Path) -> dict:
     return env | {
         "PATH": f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
         "HOME": str(scratch / "home"), "TMPDIR": str(scratch / "tmp"),
+        # the machine's compiled kernels, as a user's runs find them (a new HOME would
+        # compile every scene again, in every file)
         "ARM_SIM_CACHE": str(cache_dir()), "ROS_DOMAIN_ID": DOMAIN_ID,
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "http_proxy": nowhere, "https_proxy": nowhere, "HTTP_PROXY": nowhere,

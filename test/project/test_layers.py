@@ -14,13 +14,13 @@ PACKAGE = Path(__file__).resolve().parents[2] / "arm_sim_ros"
 # Layers, lowest first, each with its groups (a module or a folder), lowest first.
 ORDER = {
     "base": ["usage", "interface", "yaml_files", "outputs"],
-    "physics": ["model", "stepping", "effects", "dynamics", "switching", "trust", "scene", "urdf",
-                "compiled", "simulator", "batch"],
+    "physics": ["model", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
+                "scene", "urdf", "compiled", "simulator", "batch"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
              "recorder_link", "core", "transports", "main"],
-    "tools": ["arguments", "progress", "signals", "run", "wire", "accuracy", "fit", "inspect",
-              "batch", "urdf", "cli", "reference"],
+    "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
+              "inspect", "batch", "urdf", "cli", "reference"],
 }
 LAYERS = list(ORDER)
 # Third-party modules a layer or group must never import (its promise, in DESIGN.md).

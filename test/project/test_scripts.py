@@ -153,8 +153,8 @@ def test_setup_runs_pip_once_and_again_only_when_setup_py_changes(tmp_path):
         assert done.returncode == 0, done.stderr
         return pip_calls(venv)
 
-    assert test_script() == [f"-m pip install -q --disable-pip-version-check -e "
-                             f"{checkout}[test,bench,fit]"]
+    assert test_script() == [f"-m pip install -q --disable-pip-version-check --only-binary "
+                             f"numba,llvmlite -e {checkout}[test,bench,fit,fast]"]
     assert len(test_script()) == 1                      # set up: no pip, no network
     (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
     assert run([str(checkout / "scripts/run")], env).returncode == 0
@@ -173,7 +173,33 @@ def test_a_venv_installed_from_another_checkout_is_installed_again(tmp_path):
     for checkout in (first, second, first):
         assert run([str(checkout / "scripts/test"), "--version"], env).returncode == 0
     assert [call.split()[-1] for call in pip_calls(venv)] == [
-        f"{first}[test,bench,fit]", f"{second}[test,bench,fit]", f"{first}[test,bench,fit]"]
+        f"{first}[test,bench,fit,fast]", f"{second}[test,bench,fit,fast]",
+        f"{first}[test,bench,fit,fast]"]
+
+
+@pytest.mark.parametrize("script, extras", [("run", ""), ("test", "test,bench,fit")])
+def test_numba_without_a_wheel_leaves_the_pure_python_path_in_one_line(tmp_path, script,
+                                                                      extras):
+    """The extra `fast` (numba) is tried from wheels only; where none exists for the machine,
+    the install goes on without it, says so once, and is not tried again on every run."""
+    checkout = copy_of_checkout(tmp_path)
+    venv = fake_venv(tmp_path / "venv")
+    python = venv / "bin/python"          # pip refuses the extra `fast`: no numba wheel here
+    python.write_text(python.read_text().replace(
+        'echo "$@" >> ', 'case "$*" in *fast*) exit 1;; esac; echo "$@" >> '))
+    (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    env.pop("ROS_DISTRO", None)
+    command = [str(checkout / "scripts" / script)] + (["--version"] if script == "test" else [])
+    done = run(command, env)
+    assert done.returncode == 0, done.stderr
+    said = [line for line in done.stderr.splitlines() if line.startswith("scripts: numba")]
+    assert said == ["scripts: numba (the compiled path) has no wheel for this machine: the "
+                    "simulator runs its pure-Python path (slower, the same numbers)"]
+    target = f"{checkout}[{extras}]" if extras else str(checkout)
+    assert pip_calls(venv) == [f"-m pip install -q --disable-pip-version-check -e {target}"]
+    assert run(command, env).returncode == 0
+    assert len(pip_calls(venv)) == 1                    # set up: not tried on every run
 
 
 @pytest.mark.parametrize("script", ["run", "test"])

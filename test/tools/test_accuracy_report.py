@@ -14,8 +14,10 @@ from arm_sim_ros.tools.accuracy import report as report  # noqa: E402
 
 
 def run(series, kind, h, error, cpu, tolerance=None, integrator=None):
+    peer = kind.startswith("mujoco")
     return {"series": series, "kind": kind, "integrator": integrator or series, "step_size": h,
-            "tolerance": tolerance, "max_state_error": error, "cpu_s_per_sim_s": cpu}
+            "tolerance": tolerance, "max_state_error": error, "cpu_s_per_sim_s": cpu,
+            "estimate": None if peer else "global", "path": "mj_step" if peer else "python"}
 
 
 def result(scene, floor=None, crowded=False):
@@ -29,7 +31,7 @@ def result(scene, floor=None, crowded=False):
     spread = 1.02 if crowded else 2.0
     runs += [run("rk4 + tolerance", "tolerance", 0.01, 10 ** -(3 + k * (0.05 if crowded else 1)),
                  2e-4 * spread ** k, 10.0 ** -(2 + k), "rk4") for k in range(8)]
-    return {"scene": scene, "duration": 2.0, "runs": runs,
+    return {"scene": scene, "duration": 2.0, "runs": runs, "path": "python",
             "peers": {"mujoco": {"floor": floor}} if floor else {}}
 
 
@@ -100,19 +102,53 @@ def test_tolerance_labels_never_overlap(drawn):
     assert not any(a.overlaps(b) for a, b in combinations(boxes, 2))
 
 
-def test_every_tolerance_label_is_inside_its_panel(drawn):
-    """The sweep's last point is the panel's rightmost: its label went past the edge."""
-    fig, _, _ = drawn([result("scene0"), result("scene1")])
+def test_the_title_names_mujoco_only_where_it_ran():
+    alone = result("alone")
+    alone["runs"] = [r for r in alone["runs"] if r["estimate"] is not None]
+    assert report.title_of([result("both"), alone]).endswith("ours and MuJoCo on the same scenes")
+    assert report.title_of([alone]).endswith("CPU time, ours")
+
+
+def test_every_tolerance_label_stays_inside_its_panel(drawn):
+    """Alone, the tolerance sweep spans the panel from its top left corner to its bottom right
+    one: the labels there go below and to the left of their points (the last was cut at the
+    right edge)."""
+    alone = result("alone")
+    alone["runs"] = [r for r in alone["runs"] if r["kind"] == "tolerance"]
+    fig, _, _ = drawn([alone])
     renderer = renderer_of(fig)
-    for ax in (ax for ax in fig.axes if ax.axison):
-        frame = ax.get_window_extent(renderer)
-        boxes = [t.get_window_extent(renderer) for t in ax.texts]
-        assert boxes and all(frame.x0 <= b.x0 and b.x1 <= frame.x1 for b in boxes)
+    (ax,) = [ax for ax in fig.axes if ax.axison]
+    inside = ax.get_window_extent(renderer)
+    boxes = [t.get_window_extent(renderer) for t in ax.texts]
+    assert len(boxes) == 8
+    assert all(inside.x0 <= b.x0 and b.x1 <= inside.x1 and inside.y0 <= b.y0 and b.y1 <= inside.y1
+               for b in boxes), [(b.x1, b.y1) for b in boxes] + [(inside.x1, inside.y1)]
 
 
-def test_the_title_names_mujoco_only_when_it_ran(drawn):
-    with_peer = result("scene0")
-    alone = dict(with_peer, runs=[r for r in with_peer["runs"] if r["kind"] != "mujoco"])
-    assert "ours and MuJoCo" in drawn([with_peer])[0]._suptitle.get_text()
-    title = drawn([alone])[0]._suptitle.get_text()
-    assert "MuJoCo" not in title and "our integrators" in title
+def test_a_series_without_the_estimate_keeps_its_colour_dotted_and_hollow():
+    """The estimate's price reads as the gap between two lines of one colour; MuJoCo's two
+    ways of stepping likewise."""
+    on, off = report._style("rk4", "method", "global"), report._style("rk4, estimate off",
+                                                                      "method", "off")
+    stepped, rolled = (report._style("mujoco RK4", "mujoco", None),
+                       report._style("mujoco RK4 rollout", "mujoco rollout", None))
+    for solid, hollow, lines in ((on, off, ("-", ":")), (stepped, rolled, ("--", "-."))):
+        assert (solid["color"], solid["marker"]) == (hollow["color"], hollow["marker"])
+        assert (solid["linestyle"], hollow["linestyle"]) == lines
+        assert "markerfacecolor" not in solid and hollow["markerfacecolor"] == "white"
+
+
+def test_tick_labels_never_run_into_each_other(drawn):
+    """Costs from 2e3 to 6e4 µs: matplotlib labels minor ticks too there (3x10^4 ran into
+    4x10^4); the decades alone are labelled."""
+    narrow = result("narrow")
+    narrow["runs"] = [run("rk4", "method", h, 10.0 ** -k, 2e-3 * 30 ** (k / 3))
+                      for k, h in enumerate((0.02, 0.01, 0.005, 0.0025))]
+    fig, _, _ = drawn([narrow])
+    renderer = renderer_of(fig)
+    (ax,) = [ax for ax in fig.axes if ax.axison]
+    for axis in (ax.xaxis, ax.yaxis):
+        boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels(which="both")
+                 if t.get_visible() and t.get_text()]
+        assert len(boxes) >= 2
+        assert not any(a.overlaps(b) for a, b in combinations(boxes, 2))

@@ -45,7 +45,7 @@ def test_run_json_has_the_documented_keys_and_values(capsys):
     assert set(result) == {"t", "q", "qd", "tau", "kinetic", "potential", "total", "work", "dissipated",
                            "channels", "residual", "max_abs_energy_drift", "fault",
                            "refused_steps", "interrupted_at", "error_estimate",
-                           "accumulated_error", "path"}
+                           "accumulated_error", "estimate", "path"}
     assert result["path"] == ("compiled (numba)" if compiled.available() else "python")
     assert result["channels"] == {}          # the release has no actuator and no damping
     assert result["t"] == 0.5

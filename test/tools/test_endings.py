@@ -150,17 +150,22 @@ def test_record_reports_as_it_goes_and_stops_promptly_under_a_flood(tmp_path):
     assert len(messages) > 0 and f"/joint_states {len(messages)}" in out
 
 
+def write_acknowledged(domain, count):
+    """JointStates 0 .. count - 1 on /joint_states, each acknowledged by the recorder."""
+    writer = writer_for(wire.make_participant(domain, ISOLATED), "/joint_states")
+    wait_matched(writer)
+    for k in range(count):
+        writer.write(joint_state(k))
+    assert writer.wait_for_acks(60_000_000_000)
+
+
 # --- 2. every stopping signal closes the bag ---------------------------------------------------
 
 def test_record_closes_the_bag_on_sighup(tmp_path):
     domain, path = 81, tmp_path / "bag"
     process = start_cli("record", path, env=dds_env(domain))
     try:
-        writer = writer_for(wire.make_participant(domain, ISOLATED), "/joint_states")
-        wait_matched(writer)
-        for k in range(300):
-            writer.write(joint_state(k))
-        assert writer.wait_for_acks(60_000_000_000)
+        write_acknowledged(domain, 300)
         process.send_signal(signal.SIGHUP)
         out, err = finish(process)
     finally:
@@ -215,11 +220,7 @@ def test_a_killed_recorder_keeps_what_it_received_a_second_before(tmp_path):
     domain, path = 82, tmp_path / "bag"
     process = start_cli("record", path, env=dds_env(domain))
     try:
-        writer = writer_for(wire.make_participant(domain, ISOLATED), "/joint_states")
-        wait_matched(writer)
-        for k in range(500):
-            writer.write(joint_state(k))
-        assert writer.wait_for_acks(60_000_000_000)
+        write_acknowledged(domain, 500)
         deadline = time.monotonic() + 10     # within CHUNK_SECONDS (1 s) it is on disk
         while not (path / "metadata.yaml").exists() or metadata(path)["message_count"] < 500:
             assert time.monotonic() < deadline

@@ -139,6 +139,36 @@ def recording(duration: float = 4.0, seed: int = 7, arm: HiddenArm = HiddenArm()
     return checked(f"DOP853 {duration:g} s", t, q, qd, tau), exact
 
 
+COUNTS = 4096                 # the encoder of sensed_recording: 2π/4096 rad per count
+FINE = 2                      # the truth is kept every 1/(FINE x RATE) s: delays in whole steps
+
+
+@lru_cache(maxsize=4)
+def sensed_recording(duration: float = 4.0, seed: int = 7, sensor_delay: float = 0.003,
+                     command_delay: float = 0.0, offset: tuple = (0.02, -0.015)):
+    """(Recording of what a drive reads, the noiseless states every 1/(FINE x RATE) s) of the
+    multi-sine from hanging at rest, made here and not by physics/sensing/: the commands act
+    `command_delay` late (before the first, the first), and each reading is the truth
+    `sensor_delay` earlier (before t = 0, the rest it started from) + `offset` + Gaussian
+    noise NOISE[0], rounded to whole counts of a COUNTS-count encoder; the velocity is the
+    difference of the last two readings x RATE (0 at the first). The recorded torque is the
+    command, as it was given."""
+    _, tau = multisine(duration, RATE, PEAKS)
+    step = 1.0 / (FINE * RATE)
+    acting = np.repeat(tau, FINE, axis=0)
+    late = round(command_delay / step)
+    acting = np.vstack([np.repeat(acting[:1], late, axis=0), acting[:len(acting) - late]])
+    exact = integrate(HiddenArm(), (-np.pi / 2, 0.0, 0.0, 0.0), acting, step)
+    at = np.clip(np.arange(len(tau)) * FINE - round(sensor_delay / step), 0, None)
+    rng = np.random.default_rng(seed)
+    count = 2 * np.pi / COUNTS
+    q = np.round((exact[at, :2] + np.array(offset)
+                  + rng.normal(0.0, NOISE[0], (len(tau), 2))) / count) * count
+    qd = np.vstack([np.zeros((1, 2)), np.diff(q, axis=0) * RATE])
+    t = np.arange(len(tau)) / RATE
+    return checked(f"DOP853 {duration:g} s, read", t, q, qd, tau), exact
+
+
 def truth_scene(arm: HiddenArm = HiddenArm()):
     """Our scene of the hidden arm (what the fit must find; never handed to it whole)."""
     return load_scene("downward_equilibrium").replace(

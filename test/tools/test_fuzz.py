@@ -11,7 +11,8 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.node.params.ros_args import node_parameters, parse_ros_args
 from arm_sim_ros.physics.scene import FIELD_KINDS
 from arm_sim_ros.tools import cli

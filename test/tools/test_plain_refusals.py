@@ -7,7 +7,8 @@ import math
 import pytest
 
 from arm_sim_ros.node import main as node_main
-from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
+from arm_sim_ros.node.params.parameters import resolve_parameters
+from arm_sim_ros.node.params.values import ParameterRefused
 from arm_sim_ros.node.params.ros_args import rcl_scalar
 from arm_sim_ros.physics.model import arithmetic_fault
 from arm_sim_ros.physics.scene import SceneError, load_scene
@@ -92,3 +93,16 @@ def test_a_number_read_as_text_is_refused_saying_why(capsys):
     assert "ROS 2 reads" in err and "as text" in err
     assert math.isclose(resolve_parameters({"damping": rcl_scalar("0x1p-1074")}).values["damping"],
                         5e-324)
+
+
+@pytest.mark.parametrize("sets, says", [
+    (["sensors.position_noise=-1e-4,0"], "sensors.position_noise[0] = -0.0001 is impossible"),
+    (["sensors.position_resolution=0,1e-3"], "position_resolution[0] = 0 is impossible"),
+    (["step_size=0.001", "sensors.delay=0.0025"], "sensors.delay = 0.0025 s is 2.5 steps"),
+    (["step_size=0.001", "sensors.rate=300"], "1/rate must be a whole number of steps"),
+    (["step_size=0.001", "command_delay=0.0015"], "command_delay = 0.0015 s is 1.5 steps"),
+], ids=["negative noise", "zero resolution", "delay", "rate", "command delay"])
+def test_sensors_that_cannot_be_are_one_line_and_exit_2(capsys, sets, says):
+    err = one_line_exit_2(capsys, lambda: cli.main(
+        ["run", "--scene", "release", *[a for s in sets for a in ("--set", s)]]))
+    assert says in err

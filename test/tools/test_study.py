@@ -2,12 +2,13 @@
 right, and `arm-sim accuracy` writes a table, JSON and a plot, refusing bad input."""
 import json
 import sys
-from math import isinf
+from math import isfinite, isinf
 
 import pytest
 
 from arm_sim_ros.tools import cli
 from arm_sim_ros.tools.accuracy import command as study
+from arm_sim_ros.tools.accuracy.runs import MJ_STEP, ROLLOUT
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.simulator import Simulator
 
@@ -64,23 +65,23 @@ def test_study_reports_the_explainers_energy_drift_for_rk4():
 def test_rk4_fitted_order_in_the_study_is_four():
     result = study.study(load_scene("release"), 0.5, ["rk4"], [0.01, 0.005, 0.0025, 0.00125], [])
     assert result["orders"]["rk4"]["fitted"] == pytest.approx(4.0, abs=0.1)
-    evaluations = [r["rhs_evaluations"] for r in series(result, "rk4")]
-    assert evaluations == [200, 400, 800, 1600]             # four stages per step
+    assert [r["step_size"] for r in series(result, "rk4")] == [0.01, 0.005, 0.0025, 0.00125]
 
 
 def test_fitted_order_recovers_a_power_law_and_skips_points_out_of_range():
-    runs = [study.Run("x", h, None, 3.0 * h ** 3, 0, 0, 0, 0) for h in (0.1, 0.05, 0.025)]
-    runs.append(study.Run("x", 0.0125, None, 1e-15, 0, 0, 0, 0))  # round-off floor: ignored
+    runs = [study.Run("x", h, None, 3.0 * h ** 3, 0, 0) for h in (0.1, 0.05, 0.025)]
+    runs.append(study.Run("x", 0.0125, None, 1e-15, 0, 0))  # round-off floor: ignored
     assert study.fitted_order(runs) == pytest.approx(3.0, abs=1e-12)
     assert study.fitted_order(runs[3:]) is None
 
 
-def test_a_diverging_run_counts_as_infinitely_wrong():
+@pytest.mark.parametrize("estimate", study.ESTIMATES)
+def test_a_diverging_run_counts_as_infinitely_wrong(estimate):
     scene = load_scene("release")
     times = study.sample_times(scene, 0.5, 0.5)
     ref = study.reference(scene, times)
     run = study.measure(scene.replace(initial_velocities=(1e200, 1e200)), "euler", 0.25, None,
-                        times, ref)
+                        times, ref, estimate).run
     assert isinf(run.max_state_error) and isinf(run.balance_residual)
 
 
@@ -89,7 +90,6 @@ def test_dopri5_runs_at_the_publish_step_for_each_tolerance():
     loose, tight = series(result, "dopri5")
     assert loose["step_size"] == tight["step_size"] == 0.01
     assert tight["max_state_error"] < loose["max_state_error"]
-    assert tight["rhs_evaluations"] > loose["rhs_evaluations"]
     assert result["orders"] == {}
 
 
@@ -103,15 +103,17 @@ def test_cheapest_picks_the_least_cpu_time_that_reaches_the_target():
 
 # The command.
 
-def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys):
+def test_accuracy_command_writes_table_json_and_plot(tmp_path, capsys, monkeypatch):
+    from arm_sim_ros.tools import progress
+    monkeypatch.setattr(progress, "QUIET_FOR", float("inf"))   # a loaded machine's wall time
     out_json, out_png = tmp_path / "r.json", tmp_path / "p.png"
     code = cli.main(["accuracy", "--duration", "0.5", "--integrators", "rk4", "midpoint", "dopri5",
-                     "--steps", "0.01", "0.005", "--tolerances", "1e-8",
-                     "--json", str(out_json), "--plot", str(out_png)])
+                     "--steps", "0.01", "0.005", "--tolerances", "1e-8", "--tolerance-sweep",
+                     "1e-6", "--repeat", "1", "--json", str(out_json), "--plot", str(out_png)])
     assert code == 0
     captured = capsys.readouterr()
     assert "fitted order rk4" in captured.out and "dopri5" in captured.out
-    assert captured.err == ""                # work this short shows no progress
+    assert captured.err == ""                # nothing but progress goes to stderr
     data = json.loads(out_json.read_text())
     ours = {r["integrator"] for r in data["runs"] if not r["series"].startswith("mujoco")}
     assert ours == {"rk4", "midpoint", "dopri5"}
@@ -183,7 +185,7 @@ def test_the_tolerance_sweep_runs_exactly_where_the_steps_carry_an_estimate():
     assert (len(series(result, "rk4 + tolerance")), said) == (1, False)
     refused = load_scene("damped_release").replace(damping=1e9)     # no reference computed
     plan, notes, _ = study.plan_runs(refused, [0.0, 0.5], None, ["rk4"], [0.01], [], [1e-6],
-                                     (), 1)
+                                     ())
     swept = [label for label, _ in plan if "tolerance=" in label]
     said = [note for note in notes if "no error estimate" in note]
     assert (len(swept), len(said)) == (0, 1) and "stability plan refuses" in said[0]
@@ -209,13 +211,16 @@ def test_mujoco_runs_beside_ours_and_its_rk4_agrees_with_ours_where_the_physics_
     result = study.study(load_scene(name), 1.0, ["rk4"], [0.01, 0.005], [], peers=["mujoco"])
     runs = {(r["series"], r["step_size"]): r for r in result["runs"]}
     assert {s for s, _ in runs if s.startswith("mujoco")} == {
-        "mujoco Euler", "mujoco implicit", "mujoco implicitfast", "mujoco RK4"}
+        f"mujoco {i}{how}" for i in ("Euler", "implicit", "implicitfast", "RK4")
+        for how in ("", " rollout")}
     for h in (0.01, 0.005):
         ours, theirs = runs[("rk4", h)], runs[("mujoco RK4", h)]
         # The same scheme on the same equations: the same error against the same reference.
         assert theirs["max_state_error"] == pytest.approx(ours["max_state_error"],
                                                           rel=1e-6, abs=1e-12)
         assert theirs["max_state_error"] < 1e-4 and theirs["cpu_s_per_sim_s"] > 0
+        rolled = runs[("mujoco RK4 rollout", h)]   # the same steps, in MuJoCo's own loop
+        assert rolled["max_state_error"] == theirs["max_state_error"]
     assert "floor" not in result["peers"]["mujoco"]
 
 
@@ -262,7 +267,8 @@ def test_a_scene_mujoco_cannot_express_is_named_and_the_study_goes_on():
     result = study.study(load_scene("wrong_payload_model"), 0.1, ["rk4"], [0.01], [],
                          peers=["mujoco"])
     assert "controller_model" in result["peers"]["mujoco"]["unavailable"]
-    assert [r["series"] for r in result["runs"]] == ["rk4", "rk4 (scene as set)"]
+    assert [r["series"] for r in result["runs"]] == ["rk4", "rk4, estimate off",
+                                                     "rk4 (scene as set)"]
 
 
 def test_without_mujoco_the_study_says_so_in_one_line_and_carries_on(monkeypatch, capsys):
@@ -336,3 +342,131 @@ def test_the_independent_reference_and_our_stepper_at_a_fine_step_agree(name, du
         fine.run(0.01)
         apart = max(apart, max(abs(a - b) for a, b in zip(fine.state[:4], independent[k][:4])))
     assert apart < 1e-6, apart
+
+
+# What a run costs: every series priced as a user runs it (issue 41).
+
+def same_trajectory(result):
+    """Our runs by estimate mode and trajectory (max state error to 10 significant digits)."""
+    groups = {}
+    for r in result["runs"]:
+        if r["estimate"] is not None and isfinite(r["max_state_error"]):
+            groups.setdefault((r["estimate"], f"{r['max_state_error']:.9e}"), []).append(r)
+    return groups
+
+
+def test_the_same_trajectory_costs_the_same_in_every_series():
+    """damped_release at h = 10 ms takes no sub-step as set nor at tolerances 1e-2 and 1e-3:
+    the h sweep, the scene as set and those tolerances are one trajectory, and
+    exponential_rk4 without windings is rk4's bits. It was priced at 255 µs per simulated
+    second in one series and 1967 in another; now each is Simulator.run over the whole run,
+    priced call by call in interleaved rounds, the fastest of its calls: within 1.5x."""
+    result = study.study(load_scene("damped_release"), 2.0, ["rk4", "exponential_rk4"],
+                         [0.01], [], sweep=[1e-2, 1e-3], repeat=7)
+    groups = same_trajectory(result)
+    trajectory = f"{series(result, 'rk4')[0]['max_state_error']:.9e}"
+    shared = groups[("global", trajectory)]
+    assert {r["kind"] for r in shared} == {"method", "as set", "tolerance"}
+    assert {r["integrator"] for r in shared} == {"rk4", "exponential_rk4"}
+    assert (len(shared), len(groups[("off", trajectory)])) == (7, 2)
+    for runs in groups.values():
+        costs = [r["cpu_s_per_sim_s"] for r in runs]
+        assert max(costs) <= 1.5 * min(costs), [(r["series"], r["tolerance"], c)
+                                                for r, c in zip(runs, costs)]
+
+
+def test_each_integrator_runs_with_and_without_the_estimate_at_the_same_steps():
+    """The estimate never touches the step: the two series are one trajectory each step
+    size, priced apart."""
+    result = study.study(load_scene("release"), 0.5, ["rk4", "midpoint"], [0.01, 0.005], [])
+    for name in ("rk4", "midpoint"):
+        on, off = series(result, name), series(result, f"{name}, estimate off")
+        assert [r["step_size"] for r in on] == [r["step_size"] for r in off] == [0.01, 0.005]
+        assert [r["max_state_error"] for r in on] == [r["max_state_error"] for r in off]
+        assert {r["estimate"] for r in on} == {"global"} and {r["estimate"] for r in off} == {
+            "off"}
+
+
+def test_every_run_says_its_path_and_estimate_and_the_header_the_path(tmp_path, capsys):
+    out_json = tmp_path / "r.json"
+    code = cli.main(["accuracy", "--scene", "release", "--duration", "0.2", "--integrators",
+                     "rk4", "dopri5", "--steps", "0.01", "--tolerances", "1e-6",
+                     "--tolerance-sweep", "1e-6", "--repeat", "1", "--json", str(out_json)])
+    out = capsys.readouterr().out
+    assert code == 0
+    data = json.loads(out_json.read_text())
+    path = Simulator(load_scene("release")).path          # compiled where numba is installed
+    ours = [r for r in data["runs"] if r["estimate"] is not None]
+    assert {(r["integrator"], r["estimate"]) for r in ours if r["kind"] == "method"} == {
+        (n, e) for n in ("rk4", "dopri5") for e in ("global", "off")}
+    assert all(r["path"] == (path if r["integrator"] == "rk4" else "python") for r in ours)
+    assert data["path"] == path and f"Simulator.run over the whole run, path {path}" in out
+    assert (data["node"]["kind"], data["node"]["path"]) == ("node", path)
+    theirs = [r for r in data["runs"] if r["estimate"] is None]
+    assert {(r["kind"], r["path"]) for r in theirs} <= {("mujoco", MJ_STEP),
+                                                         ("mujoco rollout", ROLLOUT)}
+    if theirs:
+        assert len({r["path"] for r in theirs}) == 2 and "mujoco.rollout" in out
+
+
+def test_the_nodes_path_is_priced_beside_the_scene_as_set():
+    """The node steps through Simulator.step, a Python call per step: the scene as set's
+    trajectory at its own price, one line of the price list (not a run: the same
+    trajectory at another price would break the rule above)."""
+    from arm_sim_ros.tools.accuracy import report
+    result = study.study(load_scene("damped_release"), 0.5, ["rk4"], [0.01], [])
+    (as_set,), node = series(result, "rk4 (scene as set)"), result["node"]
+    assert (node["max_state_error"], node["substeps"]) == (as_set["max_state_error"],
+                                                           as_set["substeps"])
+    assert node["series"] == "rk4 (scene as set, Simulator.step)"
+    assert node["kind"] not in {r["kind"] for r in result["runs"]}
+    line = next(s for s in report.price_list([result], study.TARGET).splitlines()
+                if s.startswith("  ours as set, the node's path"))
+    assert f"{node['cpu_s_per_sim_s'] * 1e6:.0f} µs/s" in line
+
+
+@pytest.mark.parametrize("name, integrator, restarts", [("damped_release", "RK4", False),
+                                                        ("compliant_limit", "Euler", True)])
+def test_mujocos_rollout_takes_the_steps_mj_step_takes_even_where_it_restarts(name, integrator,
+                                                                              restarts):
+    pytest.importorskip("mujoco", reason="MuJoCo is the [bench] extra: pip install '.[bench]'")
+    from arm_sim_ros.tools.accuracy import mujoco_peer
+    scene = load_scene(name)
+    stepped = mujoco_peer.Runner(scene, integrator).run(200, 10)
+    rolled = mujoco_peer.Rollout(scene, integrator).run(200, 10)
+    assert rolled == stepped and len(rolled) == 21
+    assert any(isinf(s[0]) for s in rolled) == restarts     # unstable: infinitely wrong
+
+
+def test_prices_are_taken_in_rounds_over_every_run_in_turn(monkeypatch):
+    from arm_sim_ros.tools.accuracy import timing
+    monkeypatch.setattr(timing, "ROUND_CPU_S", 0.0)
+    calls = []
+    priced = [timing.Priced(study.Run(n, 0.01, None, 0.0, 0.0, 0.0),
+                            lambda n=n: calls.append(n), lambda n=n: calls.append(n.upper()))
+              for n in "ab"]
+    timing.price(priced, 3, 2.0)
+    assert "".join(calls) == "AaBb" * 3           # prepared untimed, then run, in turn
+    assert [p.run.cpu_s_per_sim_s for p in priced] == [min(p.calls) / 2.0 for p in priced]
+    assert [len(p.calls) for p in priced] == [3, 3]
+
+
+def test_a_short_run_is_called_in_turn_with_the_others_not_back_to_back(monkeypatch):
+    """A run shorter than its share of a round is called again, each call in turn with the
+    runs still short of theirs (a slow spell of the machine falls on all alike), with the
+    garbage collector off; its price is its fastest call."""
+    import gc
+    from arm_sim_ros.tools.accuracy import timing
+    clock, calls = [0.0], []
+    monkeypatch.setattr(timing.time, "process_time", lambda: clock[0])
+
+    def go(name, costs):
+        calls.append((name, gc.isenabled()))
+        clock[0] += costs[sum(n == name for n, _ in calls) - 1]
+    priced = [timing.Priced(study.Run("a", 0.01, None, 0.0, 0.0, 0.0),
+                            lambda: go("a", [0.004, 0.003, 0.002, 0.005])),
+              timing.Priced(study.Run("b", 0.01, None, 0.0, 0.0, 0.0), lambda: go("b", [0.02]))]
+    timing.price(priced, 1, 2.0)
+    assert [n for n, _ in calls] == ["a", "b", "a", "a", "a"]   # 4 + 3 + 2 + 5 ms >= 10
+    assert not any(collecting for _, collecting in calls) and gc.isenabled()
+    assert [p.run.cpu_s_per_sim_s for p in priced] == pytest.approx([0.001, 0.01])

@@ -60,14 +60,17 @@ def refusal(data, torque_limit: float) -> str | None:
 
 
 # What each interface takes from a command (servo.py): a position joint also takes a velocity,
-# the target of its derivative term (a trajectory's velocity).
+# the target of its derivative term (a trajectory's velocity). A joint ignores the other
+# fields: ros2_control's topic-based hardware sends every interface of every joint, and a
+# controller deactivated leaves its last values in the interfaces it held.
 TAKES = {"position": ("position", "velocity"), "velocity": ("velocity",), "effort": ("effort",)}
 FIELDS = ("position", "velocity", "effort")
+UNITS = {"position": "rad", "velocity": "rad/s", "effort": "N m"}
 
 
-def joint_state_refusal(names, fields, joint_names, interfaces) -> str | None:
+def joint_state_refusal(names, fields, joint_names) -> str | None:
     """Why a JointState (its `fields`: position, velocity, effort lists) is not a command
-    for these joints, or None. NaN is an unset value (ros2_control's), never refused."""
+    for these joints whatever they take, or None."""
     given = {field: values for field, values in zip(FIELDS, fields) if values}
     if not given:
         return "it carries no position, velocity or effort"
@@ -79,35 +82,22 @@ def joint_state_refusal(names, fields, joint_names, interfaces) -> str | None:
         return f"unknown joint {unknown[0]!r}; the joints are {', '.join(joint_names)}"
     if len(set(names)) != len(names):
         return "a joint is named twice"
-    for field, values in given.items():
-        for name, value in zip(names, values):
-            interface = interfaces[list(joint_names).index(name)]
-            if value == value and field not in TAKES[interface]:   # set (not NaN)
-                return _not_taken(name, interface, field)
     return None
 
 
-def _not_taken(joint: str, interface: str, field: str) -> str:
-    if interface == "effort" and field != "effort":
-        return (f"{joint} takes effort only: the node is torque-driven there, it does not "
-                f"follow {field}s (set servo.interface to {field} for it, or use an effort "
-                "controller)")
-    return f"{joint} is a {interface} joint: it does not take {field} (servo.interface)"
-
-
-def setpoint_refusal(field: str, data, interfaces, limit: float) -> str | None:
-    """Why `data` is not a [joint 1, joint 2] `field` command, or None (NaN: not set)."""
-    unit = "rad" if field == "position" else "rad/s"
-    values, why = _pair(data, f"{field}s in {unit}")
-    if why is not None:
-        return why
-    for i, value in enumerate(values):
-        if value != value:
-            continue
-        if abs(value) > limit:
-            return f"{field} {i + 1} = {value} {unit} is not finite or beyond {limit:g}"
-        if field not in TAKES[interfaces[i]]:
-            return _not_taken(f"joint {i + 1}", interfaces[i], field)
+def value_refusal(joint: str, field: str, value: float, torque_limit: float) -> str | None:
+    """Why a value a joint takes is refused, or None (NaN: unset, never refused)."""
+    if value != value:
+        return None
+    if field == "effort":
+        if not isfinite(value):
+            return f"{joint} effort = {value} is not finite"
+        if abs(value) > torque_limit:
+            return (f"|{joint} effort| = {abs(value):g} N m exceeds torque_limit "
+                    f"{torque_limit:g} N m")
+        return None
+    if not abs(value) <= MAX_SETPOINT:
+        return f"{joint} {field} = {value} {UNITS[field]} is not finite or beyond {MAX_SETPOINT:g}"
     return None
 
 
@@ -117,6 +107,7 @@ class CommandIntake:
     def __init__(self, log, warnings: RateLimitedLog):
         self.log, self.warnings = log, warnings
         self.received = self.refused = self.timeouts = 0
+        self._said = set()                # (joint, interface, field) ignored, said once
         self.restart()
 
     def restart(self) -> None:
@@ -125,78 +116,113 @@ class CommandIntake:
         self.setpoints = False            # a position or velocity set-point is commanded
 
     def take(self, data, policy: str, torque_limit: float, now: float):
-        """(refusal reason or None, the new command to apply or None)."""
+        """[tau1, tau2] from joint_torque_commands: (refusal reason or None, the new command
+        to apply or None). A joint that is not on effort holds it unused."""
         self.received += 1
         reason = refusal(data, torque_limit)
         if reason is not None:
             return self._refuse("refused commands", f"refused torque command: {reason}; holding "
                                 f"{list(self.value)}", reason)
-        if policy not in COMMAND_POLICIES:
-            self.warnings.warning("ignored commands", f"policy {policy!r} ignores {COMMAND_TOPIC}; "
-                                  "set policy to command to drive the arm")
+        if not self._follows(policy, COMMAND_TOPIC):
             return None, None
-        if self.received_at is None:
-            self.log.info(f"torque command {list(data)} N m, held until the next one")
-        self.value, self.received_at = (float(data[0]), float(data[1])), now
-        return None, self.value
+        return None, self._hold({0: float(data[0]), 1: float(data[1])}, now)
 
     def take_joint_state(self, names, fields, joint_names, interfaces, policy: str,
                          torque_limit: float, now: float):
         """A sensor_msgs/JointState command (as ros2_control's topic-based hardware interface
-        sends them): values matched to joints by name, in any order; a joint it does not
-        name keeps its held command. (refusal reason or None, new torque or None, set-points
-        {(field, joint index): value}). A NaN is ros2_control's unset command (its command
-        interfaces hold NaN until a controller writes them): that value is not commanded,
-        which is no error."""
-        names = list(names)
-        reason = joint_state_refusal(names, [list(f) for f in fields], list(joint_names),
-                                     interfaces)
+        sends them): values matched to joints by name, in any order, each joint taking the
+        field(s) of its interface and ignoring the others; a joint it does not name keeps its
+        held command. (refusal reason or None, new torque or None, set-points {(field, joint
+        index): value}). A NaN is ros2_control's unset command (its command interfaces hold
+        NaN until a controller writes them): that value is not commanded, which is no error.
+        Only the values a joint takes are checked: never a held one, nor one it ignores."""
+        self.received += 1
+        names, joint_names = list(names), list(joint_names)
+        fields = [list(f) for f in fields]
+        reason = joint_state_refusal(names, fields, joint_names)
+        if reason is None:
+            taken, reason = self._taken(names, fields, joint_names, interfaces, torque_limit)
         if reason is not None:
-            self.received += 1
             return (*self._refuse("refused joint commands", f"refused JointState command: "
                                   f"{reason}", reason), {})
-        index = {name: list(joint_names).index(name) for name in names}
-        position, velocity, effort = (list(f) for f in fields)
-        setpoints = {(field, index[name]): v for field, values in (("position", position),
-                                                                     ("velocity", velocity))
-                     for name, v in zip(names, values) if v == v}
-        if setpoints:
-            reason, setpoints = self.take_setpoints(setpoints, policy, now)
-            if reason is not None:
-                return reason, None, {}
-        commanded = [(index[name], tau) for name, tau in zip(names, effort) if tau == tau]
-        if not commanded:
-            if setpoints:
-                self.received += 1
-            return None, None, setpoints
-        command = list(self.value)
-        for joint, tau in commanded:
-            command[joint] = tau
-        return (*self.take(command, policy, torque_limit, now), setpoints)
+        if not taken or not self._follows(policy, "joint_commands"):
+            return None, None, {}
+        efforts = {joint: v for (field, joint), v in taken.items() if field == "effort"}
+        setpoints = {key: v for key, v in taken.items() if key[0] != "effort"}
+        self._hold_setpoints(setpoints, now)
+        return None, self._hold(efforts, now) if efforts else None, setpoints
+
+    def _taken(self, names, fields, joint_names, interfaces, torque_limit: float):
+        """({(field, joint index): value} the joints take, set (not NaN); the first refusal
+        of one of them, or None)."""
+        taken, reason = {}, None
+        for field, values in zip(FIELDS, fields):
+            for name, value in zip(names, values):
+                joint = joint_names.index(name)
+                if field not in TAKES[interfaces[joint]]:
+                    self._ignored(name, interfaces[joint], field, value)
+                    continue
+                reason = reason or value_refusal(name, field, float(value), torque_limit)
+                if value == value:
+                    taken[(field, joint)] = float(value)
+        return taken, reason
 
     def take_array(self, field: str, data, interfaces, policy: str, now: float):
         """[joint 1, joint 2] from position_commands or velocity_commands (NaN: that joint
-        not commanded): (refusal reason or None, None, set-points {(field, joint): value})."""
+        not commanded; a joint on another interface ignores it): (refusal reason or None,
+        None, set-points {(field, joint): value})."""
         self.received += 1
-        reason = setpoint_refusal(field, data, interfaces, MAX_SETPOINT)
+        values, reason = _pair(data, f"{field}s in {UNITS[field]}")
+        setpoints = {}
+        for i, value in enumerate(values or ()):
+            if field not in TAKES[interfaces[i]]:
+                self._ignored(f"joint {i + 1}", interfaces[i], field, value)
+                continue
+            reason = reason or value_refusal(f"joint {i + 1}", field, value, 0.0)
+            if value == value:
+                setpoints[(field, i)] = value
         if reason is not None:
             return self._refuse("refused commands", f"refused {field} command: {reason}",
                                 reason)[0], None, {}
-        reason, setpoints = self.take_setpoints(
-            {(field, i): float(v) for i, v in enumerate(data) if v == v}, policy, now)
-        return reason, None, setpoints
+        if not setpoints or not self._follows(policy, f"{field} set-points"):
+            return None, None, {}
+        self._hold_setpoints(setpoints, now)
+        return None, None, setpoints
 
-    def take_setpoints(self, setpoints: dict, policy: str, now: float):
-        """(None, `setpoints`) when the policy follows commands, else (None, {}) and a
-        warning; the timeout starts again."""
-        if policy not in COMMAND_POLICIES:
-            self.warnings.warning("ignored commands", f"policy {policy!r} ignores set-point "
-                                  "commands; set policy to command to drive the servos")
-            return None, {}
-        if not self.setpoints and setpoints:
+    def _follows(self, policy: str, what: str) -> bool:
+        """Whether the policy follows commands; if not, a warning (rate-limited)."""
+        if policy in COMMAND_POLICIES:
+            return True
+        self.warnings.warning("ignored commands", f"policy {policy!r} ignores {what}; set "
+                              "policy to command to drive the arm")
+        return False
+
+    def _hold(self, efforts: dict, now: float) -> tuple:
+        """{joint: torque} held from now (a joint not in it keeps its own); the command."""
+        command = list(self.value)
+        for joint, tau in efforts.items():
+            command[joint] = tau
+        if self.received_at is None:
+            self.log.info(f"torque command {command} N m, held until the next one")
+        self.value, self.received_at = tuple(command), now
+        return self.value
+
+    def _hold_setpoints(self, setpoints: dict, now: float) -> None:
+        """Set-points held from now; the timeout starts again."""
+        if not setpoints:
+            return
+        if not self.setpoints:
             self.log.info(f"set-points {dict(setpoints)} held until the next command")
-        self.setpoints, self.received_at = bool(setpoints) or self.setpoints, now
-        return None, setpoints
+        self.setpoints, self.received_at = True, now
+
+    def _ignored(self, joint: str, interface: str, field: str, value) -> None:
+        """A value in a field the joint does not take: ignored, said once at info (per
+        joint, interface and field) when it is a value (not NaN)."""
+        if value == value and (joint, interface, field) not in self._said:
+            self._said.add((joint, interface, field))
+            self.log.info(f"{joint} is on {interface} (servo.interface): it takes "
+                          f"{' and '.join(TAKES[interface])} and ignores the {field} it is "
+                          "sent (said once)")
 
     def _refuse(self, kind: str, text: str, reason: str):
         """Count a refused command and warn (rate-limited); (reason, no command)."""

@@ -8,13 +8,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
-from ...physics.effects import MAPPING_EFFECTS, EffortLimits
+from ...physics.effects import EffortLimits
 from ...physics.effects.base import REQUIRED
 from ...physics.urdf import read as urdf
-from ...physics.model import BRIEF, ParameterError, brief
+from ...physics.model import ParameterError, brief
+from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError, load_scene
 from .recording_targets import rerun_path_problem, viewer_address_problem
 from ...usage import did_you_mean, one_line
-from ...physics.scene import FIELD_KINDS, Scene, SceneError, coerce_value, load_scene
+from .values import ParameterRefused, coerce
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
 CLOCK_ORIGINS = ("zero", "wall")  # /clock and stamps from 0, or from the wall clock at start
@@ -22,20 +23,6 @@ MAX_WALL_PERIOD = 3600.0          # wall s between ticks: slower is no longer a 
 
 
 RECORDING = {"rerun_path": rerun_path_problem, "rerun_connect": viewer_address_problem}
-
-
-class ParameterRefused(ValueError):
-    """A parameter value the node will not take; str() names the parameter and the reason."""
-
-    def __init__(self, name: str, reason: str):
-        reason = shorten(one_line(reason))   # one log line, never a 100 KB one
-        super().__init__(f"parameter {brief(name, 60)} refused: {reason}")
-        self.name, self.reason = name, reason
-
-
-def shorten(text: str, limit: int = 3 * BRIEF) -> str:
-    """`text` cut to `limit` characters, saying how long it was."""
-    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} chars)"
 
 
 # When a parameter may change (main.py's --help prints it): the one place it is decided.
@@ -108,16 +95,17 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
-        {"pair": "float_pair", "names": "str_list"}.get(parameter.kind, "float"),
+        {"pair": "float_pair", "names": "str_list", "choice": "str"}.get(parameter.kind, "float"),
         _effect_value(effect, key),
         f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
         when=START if effect in START_ONLY_WHY else KEPT)
 
 
-# One parameter per scene key of every effect, named and checked as the scene file names and
-# checks it (`friction.coulomb`); generated from the effects' own key lists.
+# One parameter per scene key of every effect and of the sensors, named and checked as the
+# scene file names and checks it (`friction.coulomb`, `sensors.delay`); generated from their
+# own key lists.
 EFFECT_PARAMETERS = (_effect_spec("effort_limits", None, EffortLimits.parameter),) + tuple(
-    _effect_spec(effect, p.name, p) for effect, kind in MAPPING_EFFECTS.items()
+    _effect_spec(effect, p.name, p) for effect, kind in MAPPINGS.items()
     for p in kind.parameters)
 
 
@@ -134,6 +122,8 @@ PARAMETERS = (
     _scene_spec("damping", "float_or_pair", "joint damping d or [d1, d2], N m s/rad (0 = off)",
                 when=KEPT),
     *EFFECT_PARAMETERS,
+    _scene_spec("command_delay", "float", "s from a command (torque, set-point, the policy's or "
+                "servo's torque) to when it acts; a whole number of steps (0 = none)", when=KEPT),
     _scene_spec("initial_positions", "float_pair", "[q1, q2] rad at start and reset"),
     _scene_spec("initial_velocities", "float_pair", "[qd1, qd2] rad/s at start and reset"),
     _scene_spec("link_lengths", "float_pair", "[l1, l2] m"),
@@ -148,6 +138,9 @@ PARAMETERS = (
     _scene_spec("max_substeps", "float", "the most sub-steps the tolerance may ask of one step; "
                 "past it the step is taken at the cap and the node says so once; the node "
                 "refuses physics whose stability plan needs more"),
+    _scene_spec("estimate", "str", "what the run computes of its own error: global (the "
+                "error estimate, in diagnostics and the recording) or off (none: the steps "
+                "alone, cheaper; it sets tolerance to 0)"),
     _scene_spec("step_size", "float", "integration step h, s; must divide 1/publish_rate"),
     ParameterSpec("publish_rate", "float", 100.0, "ticks per simulated second; each tick "
                   "publishes joint_states"),
@@ -174,9 +167,10 @@ PARAMETERS = (
                   "start + simulated time)", when=START),
     ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
                   "received, for deterministic controller tests"),
-    ParameterSpec("lockstep_wait", "float", 0.0, "in lockstep, a tick of its own once no "
-                  "command came for this long (wall s; 0 = never): controller_manager under "
-                  "use_sim_time waits for the clock to move before it commands"),
+    ParameterSpec("lockstep_wait", "float", 0.1, "in lockstep, while a node listens on "
+                  "/clock, a tick of its own once no command came for this long (wall s; 0 = "
+                  "never): controller_manager under use_sim_time waits for the clock to move "
+                  "before it commands"),
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 SCENE_PARAMETERS = tuple(s.name for s in PARAMETERS if s.scene_field)
@@ -188,47 +182,12 @@ START_ONLY = tuple(s.name for s in sorted(PARAMETERS, key=lambda s: s.effect is 
 READ_ONLY = ("scene", "robot_description")   # declared read-only (both transports)
 EFFECT_GROUPS = {effect: tuple((s.name, s.name.partition(".")[2]) for s in EFFECT_PARAMETERS
                                if s.name.startswith(effect + "."))
-                 for effect in MAPPING_EFFECTS}     # mapping effect -> (parameter, key) pairs
+                 for effect in MAPPINGS}     # mapping effect -> (parameter, key) pairs
 
 
 def when_changed(name: str) -> str:
     """What setting `name` while the node runs does."""
     return SPECS[name].when
-
-
-SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
-               "float_or_pair": "float_or_pair"}
-
-
-def coerce(spec: ParameterSpec, value):
-    """The value in the parameter's kind, or ParameterRefused. Numbers, text and pairs are
-    checked as scene values are; integers pass as doubles (`-p publish_rate:=100`)."""
-    kind, name = spec.kind, spec.name
-    if spec.effect is not None:
-        # not set: the effect's default, or no effect at all. `ros2 param dump` writes a
-        # parameter not set as YAML null, which rcl reads back as the text "null".
-        if value is None or value == "null":
-            return None
-        try:
-            value = spec.effect.coerce(name.partition(".")[0], value)
-        except ParameterError as error:
-            raise ParameterRefused(name, str(error)) from None
-        return list(value) if isinstance(value, tuple) else value
-    if kind in SCENE_KINDS:
-        try:
-            value = coerce_value(name, SCENE_KINDS[kind], value)
-        except SceneError as error:
-            raise ParameterRefused(name, str(error)) from None
-        return list(value) if isinstance(value, tuple) else value
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise ParameterRefused(name, f"must be true or false, got {brief(value)}")
-        return value
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-        raise ParameterRefused(name, f"must be a list, got {brief(value)}")
-    if not all(isinstance(v, str) for v in value):
-        raise ParameterRefused(name, f"must be a list of text, got {brief(list(value))}")
-    return list(value)
 
 
 @dataclass(frozen=True)
@@ -323,6 +282,8 @@ def _load(name: str) -> Scene:
 
 def _build(values: dict, load, changed) -> NodeConfig:
     values = {name: coerce(SPECS[name], values[name]) for name in SPECS}
+    if values["estimate"] == "off" and "estimate" in changed and "tolerance" not in changed:
+        values["tolerance"] = 0.0        # as in a scene: estimate off alone, no tolerance
     base = load(values["scene"])
     scene_values = {name: values[name] for name in SCENE_PARAMETERS if name in FIELD_KINDS}
     for effect, keys in EFFECT_GROUPS.items():   # a key not set leaves it to the effect

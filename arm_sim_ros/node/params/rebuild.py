@@ -10,7 +10,8 @@ from ...physics.effects import servo
 from ...physics.model import ParameterError
 from ...physics.scene import SceneError
 from ...physics.simulator import Simulator
-from .parameters import NodeConfig, ParameterRefused, blamed
+from .parameters import NodeConfig, blamed
+from .values import ParameterRefused
 
 
 def build_simulator(config: NodeConfig, changed) -> Simulator:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..params.parameters import PARAMETERS, READ_ONLY, SPECS, ParameterRefused, shorten
+from ..params.parameters import PARAMETERS, READ_ONLY, SPECS
+from ..params.values import ParameterRefused, shorten
 
 # rcl_interfaces/msg/ParameterType
 (NOT_SET, BOOL, INTEGER, DOUBLE, STRING, BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY,

@@ -1,6 +1,7 @@
 """The arm_sim node on cyclonedds, as a ROS 2 peer on rmw_cyclonedds sees it.
 
-Mirrors the rclpy transport: a publisher of joint_states and /diagnostics, a subscription to
+Mirrors the rclpy transport: a publisher of joint_states and /diagnostics (and, once the
+scene has sensors, of ~/true_joint_states, announced then), a subscription to
 joint_torque_commands, a tick timer and a 1 Hz diagnostics timer, plus the
 `ros_discovery_info` announcement that makes `ros2 node list` show the node, and the
 parameter services, `~/reset` and /parameter_events (dds_services.py). Ticks can be driven
@@ -11,19 +12,23 @@ from __future__ import annotations
 import logging
 import time
 
-from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+from cyclonedds._clayer import ddspy_write
+from cyclonedds.core import (DDSException, InstanceState, ReadCondition, SampleState, ViewState,
+                             WaitSet)
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from ..wire import messages as msg
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
+from ..wire.cdr import clock_cdr, joint_state_bytes
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS,
+                          TRUE_JOINT_STATES_TOPIC, split_stamp)
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..params.parameters import resolve_parameters
 from ..params.ros_args import remap_name
-from ..schedule import TickSchedule
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
@@ -36,10 +41,13 @@ def _stamp(stamp_ns: int) -> msg.Time:
     return msg.Time(*split_stamp(stamp_ns))
 
 
-def to_joint_state(data: JointStateData) -> msg.JointState:
-    return msg.JointState(header=msg.Header(stamp=_stamp(data.stamp_ns), frame_id=data.frame_id),
-                          name=list(data.name), position=data.position, velocity=data.velocity,
-                          effort=data.effort)
+def write_cdr(writer: DataWriter, data: bytes) -> None:
+    """DataWriter.write of a sample serialized already (cdr.py): what cyclonedds-python
+    11.0.1's write does once its sample.serialize() has run (pub.py), with no sample built:
+    the node writes a JointState and a Clock every tick."""
+    result = ddspy_write(writer._ref, data)
+    if result < 0:
+        raise DDSException(result, f"Occurred while writing sample in {writer!r}")
 
 
 def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
@@ -47,6 +55,11 @@ def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
                                   hardware_id=data.hardware_id,
                                   values=[msg.KeyValue(k, v) for k, v in data.values])
     return msg.DiagnosticArray(header=msg.Header(stamp=_stamp(data.stamp_ns)), status=[status])
+
+
+def clock_listened(core: ArmSimCore, clock_writer) -> bool:
+    """Whether a node listens on /clock (a use_sim_time peer)."""
+    return core.config.values["publish_clock"] and msg.matched(clock_writer) > 0
 
 
 class DdsArmSimNode:
@@ -65,6 +78,8 @@ class DdsArmSimNode:
         topic = lambda ros_name: msg.ros_topic(self.resolve(ros_name))  # noqa: E731
         values = node_config.values
         self.joint_state_writer = self._writer(topic(values["joint_states_topic"]), msg.JointState)
+        self.truth_writer = None        # ~/true_joint_states: made with the first truth
+        self._topic = topic
         self.diagnostics_writer = self._writer(topic(DIAGNOSTICS_TOPIC), msg.DiagnosticArray)
         # /clock at the ROS default QoS: it matches rclpy's best-effort subscription too
         self.clock_writer = self._writer(topic("/clock"), msg.Clock)
@@ -98,18 +113,20 @@ class DdsArmSimNode:
 
     def _announce(self) -> None:
         """Publish ros_discovery_info: the graph entry `ros2 node list` reads (transient-local,
-        so tools that start later still see it)."""
-        self.discovery_writer = DataWriter(
-            self.participant,
-            Topic(self.participant, "ros_discovery_info", msg.ParticipantEntitiesInfo),
-            qos=msg.discovery_info_qos())
+        so tools that start later still see it); again when an endpoint is added."""
+        if getattr(self, "discovery_writer", None) is None:
+            self.discovery_writer = DataWriter(
+                self.participant,
+                Topic(self.participant, "ros_discovery_info", msg.ParticipantEntitiesInfo),
+                qos=msg.discovery_info_qos())
+        truth = [msg.gid(self.truth_writer)] if self.truth_writer is not None else []
         node = msg.NodeEntitiesInfo(
             node_namespace=self.namespace, node_name=self.name,
             reader_gid_seq=[msg.gid(self.command_reader), msg.gid(self.joint_command_reader)]
             + [msg.gid(r) for r in self.setpoint_readers.values()]
             + [msg.gid(r) for r in self.services.readers],   # service requests
             writer_gid_seq=[msg.gid(self.joint_state_writer), msg.gid(self.diagnostics_writer),
-                            msg.gid(self.clock_writer)]
+                            msg.gid(self.clock_writer)] + truth
             + [msg.gid(w) for w in self.services.writers])   # replies, parameter events
         self.discovery_writer.write(msg.ParticipantEntitiesInfo(
             gid=msg.gid(self.participant), node_entities_info_seq=[node]))
@@ -119,8 +136,9 @@ class DdsArmSimNode:
     def take_commands(self, timeout: float = 0.0) -> int:
         """Hand every waiting command to the core, waiting up to `timeout` s for the first.
         Returns how many arrived (refused ones included)."""
-        if timeout > 0:
-            self._command_ready.wait(duration(seconds=timeout))
+        # one look at the read conditions, instead of a take on every reader each tick
+        if not self._command_ready.wait(duration(seconds=timeout) if timeout > 0 else 0):
+            return self._publish_lockstep()
         count = 0
         for sample in self.command_reader.take(N=256):
             if isinstance(sample, msg.Float64MultiArray):  # InvalidSample: lifecycle, no data
@@ -136,8 +154,11 @@ class DdsArmSimNode:
                 self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
                                                  sample.effort)
                 count += 1
+        return self._publish_lockstep(count)
+
+    def _publish_lockstep(self, count: int = 0) -> int:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
         return count
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
@@ -145,15 +166,30 @@ class DdsArmSimNode:
         lockstep the commands tick instead and the timer only serves."""
         self.take_commands()
         self.services.poll()   # answer service requests between ticks
-        data = self.core.tick(wall_now)
+        data = self.core.tick(wall_now, clock_listened(self.core, self.clock_writer))
         if data is not None:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
-        self.joint_state_writer.write(to_joint_state(data))
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
+        """joint_states and /clock, serialized straight from the data (cdr.py: the bytes a
+        messages.JointState and messages.Clock serialize to, with neither built); with sensors,
+        the readings there and the state on ~/true_joint_states at the same stamp."""
+        sec, nanosec = split_stamp(data.stamp_ns)
+        write_cdr(self.joint_state_writer, joint_state_bytes(
+            sec, nanosec, data.frame_id, data.name, data.position, data.velocity, data.effort))
+        if (truth := data.truth) is not None:
+            if self.truth_writer is None:
+                self.truth_writer = self._writer(self._topic(TRUE_JOINT_STATES_TOPIC),
+                                                 msg.JointState)
+                self._announce()
+            write_cdr(self.truth_writer, joint_state_bytes(
+                sec, nanosec, truth.frame_id, truth.name, truth.position, truth.velocity,
+                truth.effort))
         if self.core.config.values["publish_clock"]:
-            self.clock_writer.write(msg.Clock(_stamp(data.stamp_ns)))
+            if clock_after:               # a lockstep tick: the state first, then /clock
+                time.sleep(clock_after)
+            write_cdr(self.clock_writer, clock_cdr(sec, nanosec))
 
     def _publish_clock(self) -> None:
         """The current time on /clock: at start, and while lockstep waits for a command."""
@@ -184,7 +220,8 @@ class DdsArmSimNode:
             if self.core.config.values["lockstep"] and not self.core.paused:
                 self.services.poll()                   # commands tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
-                    data = self.core.tick(now)         # lockstep_wait: a tick of its own
+                    listened = clock_listened(self.core, self.clock_writer)
+                    data = self.core.tick(now, listened)   # lockstep_wait: a tick of its own
                     if data is None:
                         self._publish_clock()          # the time, while nobody commands
                     else:
@@ -222,3 +259,4 @@ class DdsArmSimNode:
         self.joint_command_reader = self.clock_writer = self.name_watch = None
         self.setpoint_readers = {}
         self.joint_state_writer = self.diagnostics_writer = self.participant = None
+        self.truth_writer = None

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.annotations import final
-from cyclonedds.idl.types import array, int8, int64, sequence, uint8, uint64
+from cyclonedds.idl.types import array, int8, sequence, uint8, uint64
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.topic import Topic
@@ -21,6 +21,7 @@ from cyclonedds.util import duration
 
 from ...interface import split_stamp
 from ..wire import messages as msg
+from ..wire.service_types import ros_type_names, service
 from ..services import simulate_steps as steps
 from .dds_simulation import Result as ActionResult   # simulation_interfaces/msg/Result
 
@@ -78,62 +79,17 @@ class FeedbackMessage(IdlStruct,
     feedback: Feedback = field(default_factory=Feedback)
 
 
-# --- the services, each with rmw_cyclonedds' request header (guid, seq) first ---------------
+# --- the services (wire/service_types.py: rmw_cyclonedds' request header first) ------------
 
-@final
-@dataclass
-class SendGoalRequest(
-        IdlStruct, typename="simulation_interfaces.action.dds_.SimulateSteps_SendGoal_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
-    goal: Goal = field(default_factory=Goal)
-
-
-@final
-@dataclass
-class SendGoalResponse(
-        IdlStruct, typename="simulation_interfaces.action.dds_.SimulateSteps_SendGoal_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    accepted: bool = False
-    stamp: msg.Time = field(default_factory=msg.Time)
-
-
-@final
-@dataclass
-class GetResultRequest(
-        IdlStruct, typename="simulation_interfaces.action.dds_.SimulateSteps_GetResult_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
-
-
-@final
-@dataclass
-class GetResultResponse(
-        IdlStruct, typename="simulation_interfaces.action.dds_.SimulateSteps_GetResult_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    status: int8 = 0
-    result: Result = field(default_factory=Result)
-
-
-@final
-@dataclass
-class CancelGoalRequest(IdlStruct, typename="action_msgs.srv.dds_.CancelGoal_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    goal_info: GoalInfo = field(default_factory=GoalInfo)
-
-
-@final
-@dataclass
-class CancelGoalResponse(IdlStruct, typename="action_msgs.srv.dds_.CancelGoal_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    return_code: int8 = 0
-    goals_canceling: sequence[GoalInfo] = field(default_factory=list)
+SendGoalRequest, SendGoalResponse = service(
+    "simulation_interfaces/action/SimulateSteps_SendGoal",
+    {"goal_id": UUID, "goal": Goal}, {"accepted": bool, "stamp": msg.Time})
+GetResultRequest, GetResultResponse = service(
+    "simulation_interfaces/action/SimulateSteps_GetResult",
+    {"goal_id": UUID}, {"status": int8, "result": Result})
+CancelGoalRequest, CancelGoalResponse = service(
+    "action_msgs/srv/CancelGoal",
+    {"goal_info": GoalInfo}, {"return_code": int8, "goals_canceling": sequence[GoalInfo]})
 
 
 ACTION = "simulate_steps"
@@ -143,15 +99,10 @@ TYPES = dict(zip(SERVICES, ((SendGoalRequest, SendGoalResponse),
                             (CancelGoalRequest, CancelGoalResponse),
                             (GetResultRequest, GetResultResponse))))   # service: its types
 ROS_TYPE_NAMES = {
-    SendGoalRequest: "simulation_interfaces/action/SimulateSteps_SendGoal_Request",
-    SendGoalResponse: "simulation_interfaces/action/SimulateSteps_SendGoal_Response",
-    GetResultRequest: "simulation_interfaces/action/SimulateSteps_GetResult_Request",
-    GetResultResponse: "simulation_interfaces/action/SimulateSteps_GetResult_Response",
     FeedbackMessage: "simulation_interfaces/action/SimulateSteps_FeedbackMessage",
-    CancelGoalRequest: "action_msgs/srv/CancelGoal_Request",
-    CancelGoalResponse: "action_msgs/srv/CancelGoal_Response",
     GoalStatusArray: "action_msgs/msg/GoalStatusArray",
-}
+} | ros_type_names((SendGoalRequest, SendGoalResponse), (GetResultRequest, GetResultResponse),
+                   (CancelGoalRequest, CancelGoalResponse))
 # RIHS01 hashes (REP 2011) of the definitions (SimulateSteps.action, jazzy branch; action_msgs,
 # unique_identifier_msgs, builtin_interfaces of Jazzy); test_simulate_steps checks each.
 TYPE_HASHES = {
@@ -229,9 +180,10 @@ class DdsSimulateSteps:
     def advance(self) -> None:
         """One tick of the executing goal and its feedback; the status list when it changed;
         the results waited for, of goals that finished."""
-        if self.goals is None:
-            return
-        goal = self.goals.advance(listening=bool(msg.matched(self.feedback_writer)))
+        goals = self.goals
+        if goals is None or not (goals.goals or goals.changed or self.waiting):
+            return                  # no goal: the node polls here every tick, and goes on
+        goal = goals.advance(listening=bool(msg.matched(self.feedback_writer)))
         if goal is not None:
             self.feedback_writer.write(FeedbackMessage(UUID(list(goal.goal_id)), Feedback(
                 goal.completed, goal.remaining)))

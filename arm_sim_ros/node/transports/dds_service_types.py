@@ -1,16 +1,8 @@
 """rcl_interfaces parameter messages and services, and std_srvs/Trigger, as cyclonedds IDL
-types laid out exactly as rmw_cyclonedds (Jazzy) puts them on the wire.
-
-A service sample is the request or response struct with rmw_cyclonedds' request header in
-front: `cdds_request_header_t {uint64 guid; int64 seq}` written straight after the 4-byte
-encapsulation (rmw_cyclonedds_cpp/src/serdata.hpp; Serialization.cpp
-`serialize_top_level(cursor, cdds_request_wrapper_t)`), so CDR alignment of the payload
-counts from the start of the header. Here that header is the first two fields of each
-request/response struct (`guid`, `seq`); the bytes are the same. Type names are
-`<pkg>::srv::dds_::<Srv>_Request_` / `_Response_` (ServiceTypeSupport_impl.hpp); structs are
-final and keyless (XCDR1), as DESIGN.md's wire facts require. An empty request gets rosidl's
-`uint8 structure_needs_at_least_one_member`. (No `from __future__ import annotations`:
-cyclonedds resolves field types at runtime.)
+types laid out exactly as rmw_cyclonedds (Jazzy) puts them on the wire: the messages as
+final keyless structs (XCDR1), the services with rmw_cyclonedds' request header first
+(wire/service_types.py). (No `from __future__ import annotations`: cyclonedds resolves field
+types at runtime.)
 """
 
 from dataclasses import dataclass, field
@@ -20,6 +12,7 @@ from cyclonedds.idl.annotations import final
 from cyclonedds.idl.types import float64, int64, sequence, uint8, uint64
 
 from ..wire.messages import Time
+from ..wire.service_types import ros_type_names, service
 
 
 # --- rcl_interfaces/msg --------------------------------------------------------------------
@@ -99,149 +92,35 @@ class ParameterEvent(IdlStruct, typename="rcl_interfaces.msg.dds_.ParameterEvent
     deleted_parameters: sequence[Parameter] = field(default_factory=list)
 
 
-# --- rcl_interfaces/srv, each with rmw_cyclonedds' request header (guid, seq) first ---------
+# --- rcl_interfaces/srv and std_srvs/srv/Trigger (wire/service_types.py: the header first) ---
 
-@final
-@dataclass
-class ListParametersRequest(IdlStruct, typename="rcl_interfaces.srv.dds_.ListParameters_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    prefixes: sequence[str] = field(default_factory=list)
-    depth: uint64 = 0
-
-
-@final
-@dataclass
-class ListParametersResponse(IdlStruct,
-                             typename="rcl_interfaces.srv.dds_.ListParameters_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    result: ListParametersResult = field(default_factory=ListParametersResult)
-
-
-@final
-@dataclass
-class GetParametersRequest(IdlStruct, typename="rcl_interfaces.srv.dds_.GetParameters_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    names: sequence[str] = field(default_factory=list)
-
-
-@final
-@dataclass
-class GetParametersResponse(IdlStruct, typename="rcl_interfaces.srv.dds_.GetParameters_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    values: sequence[ParameterValue] = field(default_factory=list)
-
-
-@final
-@dataclass
-class SetParametersRequest(IdlStruct, typename="rcl_interfaces.srv.dds_.SetParameters_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    parameters: sequence[Parameter] = field(default_factory=list)
-
-
-@final
-@dataclass
-class SetParametersResponse(IdlStruct, typename="rcl_interfaces.srv.dds_.SetParameters_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    results: sequence[SetParametersResult] = field(default_factory=list)
-
-
-@final
-@dataclass
-class SetParametersAtomicallyRequest(
-        IdlStruct, typename="rcl_interfaces.srv.dds_.SetParametersAtomically_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    parameters: sequence[Parameter] = field(default_factory=list)
-
-
-@final
-@dataclass
-class SetParametersAtomicallyResponse(
-        IdlStruct, typename="rcl_interfaces.srv.dds_.SetParametersAtomically_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    result: SetParametersResult = field(default_factory=SetParametersResult)
-
-
-@final
-@dataclass
-class DescribeParametersRequest(IdlStruct,
-                                typename="rcl_interfaces.srv.dds_.DescribeParameters_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    names: sequence[str] = field(default_factory=list)
-
-
-@final
-@dataclass
-class DescribeParametersResponse(IdlStruct,
-                                 typename="rcl_interfaces.srv.dds_.DescribeParameters_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    descriptors: sequence[ParameterDescriptor] = field(default_factory=list)
-
-
-@final
-@dataclass
-class GetParameterTypesRequest(IdlStruct,
-                               typename="rcl_interfaces.srv.dds_.GetParameterTypes_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    names: sequence[str] = field(default_factory=list)
-
-
-@final
-@dataclass
-class GetParameterTypesResponse(IdlStruct,
-                                typename="rcl_interfaces.srv.dds_.GetParameterTypes_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    types: sequence[uint8] = field(default_factory=list)
-
-
-# --- std_srvs/srv/Trigger ------------------------------------------------------------------
-
-@final
-@dataclass
-class TriggerRequest(IdlStruct, typename="std_srvs.srv.dds_.Trigger_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    structure_needs_at_least_one_member: uint8 = 0
-
-
-@final
-@dataclass
-class TriggerResponse(IdlStruct, typename="std_srvs.srv.dds_.Trigger_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    success: bool = False
-    message: str = ""
-
+ListParametersRequest, ListParametersResponse = service(
+    "rcl_interfaces/srv/ListParameters",
+    {"prefixes": sequence[str], "depth": uint64}, {"result": ListParametersResult})
+GetParametersRequest, GetParametersResponse = service(
+    "rcl_interfaces/srv/GetParameters",
+    {"names": sequence[str]}, {"values": sequence[ParameterValue]})
+SetParametersRequest, SetParametersResponse = service(
+    "rcl_interfaces/srv/SetParameters",
+    {"parameters": sequence[Parameter]}, {"results": sequence[SetParametersResult]})
+SetParametersAtomicallyRequest, SetParametersAtomicallyResponse = service(
+    "rcl_interfaces/srv/SetParametersAtomically",
+    {"parameters": sequence[Parameter]}, {"result": SetParametersResult})
+DescribeParametersRequest, DescribeParametersResponse = service(
+    "rcl_interfaces/srv/DescribeParameters",
+    {"names": sequence[str]}, {"descriptors": sequence[ParameterDescriptor]})
+GetParameterTypesRequest, GetParameterTypesResponse = service(
+    "rcl_interfaces/srv/GetParameterTypes", {"names": sequence[str]}, {"types": sequence[uint8]})
+TriggerRequest, TriggerResponse = service(
+    "std_srvs/srv/Trigger", {}, {"success": bool, "message": str})
 
 # ROS interface name of each wire type: its RIHS01 hash goes into the endpoints' USER_DATA.
-ROS_TYPE_NAMES = {
-    ParameterEvent: "rcl_interfaces/msg/ParameterEvent",
-    ListParametersRequest: "rcl_interfaces/srv/ListParameters_Request",
-    ListParametersResponse: "rcl_interfaces/srv/ListParameters_Response",
-    GetParametersRequest: "rcl_interfaces/srv/GetParameters_Request",
-    GetParametersResponse: "rcl_interfaces/srv/GetParameters_Response",
-    SetParametersRequest: "rcl_interfaces/srv/SetParameters_Request",
-    SetParametersResponse: "rcl_interfaces/srv/SetParameters_Response",
-    SetParametersAtomicallyRequest: "rcl_interfaces/srv/SetParametersAtomically_Request",
-    SetParametersAtomicallyResponse: "rcl_interfaces/srv/SetParametersAtomically_Response",
-    DescribeParametersRequest: "rcl_interfaces/srv/DescribeParameters_Request",
-    DescribeParametersResponse: "rcl_interfaces/srv/DescribeParameters_Response",
-    GetParameterTypesRequest: "rcl_interfaces/srv/GetParameterTypes_Request",
-    GetParameterTypesResponse: "rcl_interfaces/srv/GetParameterTypes_Response",
-    TriggerRequest: "std_srvs/srv/Trigger_Request",
-    TriggerResponse: "std_srvs/srv/Trigger_Response",
-}
+ROS_TYPE_NAMES = {ParameterEvent: "rcl_interfaces/msg/ParameterEvent"} | ros_type_names(
+    (ListParametersRequest, ListParametersResponse), (GetParametersRequest, GetParametersResponse),
+    (SetParametersRequest, SetParametersResponse),
+    (SetParametersAtomicallyRequest, SetParametersAtomicallyResponse),
+    (DescribeParametersRequest, DescribeParametersResponse),
+    (GetParameterTypesRequest, GetParameterTypesResponse), (TriggerRequest, TriggerResponse))
 
 # RIHS01 hashes (REP 2011) of the request/response messages as rosidl computes them for Jazzy;
 # test_dds_services checks each against the rosbags library.

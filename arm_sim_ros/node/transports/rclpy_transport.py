@@ -14,19 +14,23 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS, split_stamp
+from ...interface import (COMMAND_TOPIC, DIAGNOSTICS_TOPIC, NODE_NAME, SETPOINT_TOPICS,
+                          TRUE_JOINT_STATES_TOPIC, split_stamp)
 from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..services.parameter_services import could_not_apply
-from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, ParameterRefused,
-                                 resolve_parameters, scene_defaults)
-from ..schedule import TickSchedule
+from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, resolve_parameters,
+                                 scene_defaults)
+from ..params.values import ParameterRefused
+from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
 from ..services.simulation import SimulationControl
+from ..wire.cdr import clock_cdr, joint_state_bytes
 from . import rclpy_simulation
 
 
@@ -35,15 +39,36 @@ def _stamp(stamp_ns: int) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def to_joint_state(data: JointStateData) -> JointState:
-    message = JointState()
-    message.header.stamp = _stamp(data.stamp_ns)
+def to_joint_state(data: JointStateData, message: JointState | None = None) -> JointState:
+    """`data` as a JointState: into `message` when given (a publisher's own, reused every
+    tick: publish serializes it at once, and a message built anew costs more than the
+    publish)."""
+    message = JointState() if message is None else message
+    message.header.stamp.sec, message.header.stamp.nanosec = split_stamp(data.stamp_ns)
     message.header.frame_id = data.frame_id
-    message.name = list(data.name)
+    message.name = data.name
     message.position = data.position
     message.velocity = data.velocity
     message.effort = data.effort
     return message
+
+
+# What rmw_writes_our_cdr asks the RMW to serialize: odd-length strings, every sequence.
+SAMPLE = JointStateData(3 * 10**9 + 7, "f", ["j1", "joint_2"], [0.5, -1.0], [2.0, 0.25],
+                        [-3.5, 1e-3])
+
+
+def rmw_writes_our_cdr() -> bool:
+    """Whether this RMW serializes a JointState and a Clock to the bytes cdr.py writes (XCDR1,
+    as rmw_cyclonedds does): then they are published as those bytes (Publisher.publish of
+    a serialized message), a fifth of the cost of a message converted for the RMW each tick.
+    Asked of the RMW itself at start (rclpy's serialize_message), so another RMW that
+    serializes otherwise gets messages, and the wire is the RMW's own either way."""
+    sec, nanosec = split_stamp(SAMPLE.stamp_ns)
+    clock = Clock(clock=_stamp(SAMPLE.stamp_ns))
+    return (serialize_message(to_joint_state(SAMPLE)) == joint_state_bytes(sec, nanosec,
+                                                                            *SAMPLE[1:6])
+            and serialize_message(clock) == clock_cdr(sec, nanosec))
 
 
 def to_diagnostic_array(data: DiagnosticData) -> DiagnosticArray:
@@ -79,7 +104,11 @@ class ArmSimNode(Node):
         values = config.values
         self.joint_state_publisher = self.create_publisher(
             JointState, values["joint_states_topic"], 10)
+        self.truth_publisher = None      # ~/true_joint_states, made with the first truth
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10)
+        self.serialized, self._strings = rmw_writes_our_cdr(), (None, None, False)
+        # else these, filled anew every tick (not `_clock`: rclpy's Node has its own)
+        self.joint_state_message, self.clock_message = JointState(), Clock()
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self.command_subscription = self.create_subscription(
             Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
@@ -113,7 +142,7 @@ class ArmSimNode(Node):
 
     def _publish_lockstep(self) -> None:
         for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data)
+            self._publish(data, STATE_BEFORE_CLOCK)
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
@@ -124,15 +153,48 @@ class ArmSimNode(Node):
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
-        data = self.core.tick()
+        data = self.core.tick(clock_listened=self.core.config.values["publish_clock"] and
+                              self.clock_publisher.get_subscription_count() > 0)
         if data is not None:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData) -> None:
-        self.joint_state_publisher.publish(to_joint_state(data))
+    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
+        """joint_states and /clock; with sensors, the readings there and the state on
+        ~/true_joint_states at the same stamp. /clock `clock_after` s after the state (a
+        lockstep tick's STATE_BEFORE_CLOCK)."""
+        self._publish_state(self.joint_state_publisher, data, self.joint_state_message)
+        if data.truth is not None:
+            if self.truth_publisher is None:
+                self.truth_publisher = self.create_publisher(
+                    JointState, TRUE_JOINT_STATES_TOPIC, 10)
+                self.truth_message = JointState()
+            self._publish_state(self.truth_publisher, data.truth, self.truth_message)
         if self.core.config.values["publish_clock"]:
-            self.clock_publisher.publish(Clock(clock=_stamp(data.stamp_ns)))
+            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
+                time.sleep(clock_after)
+            if self.serialized:
+                self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
+            else:
+                self.clock_message.clock = _stamp(data.stamp_ns)
+                self.clock_publisher.publish(self.clock_message)
+
+    def _publish_state(self, publisher, data: JointStateData, message: JointState) -> None:
+        """`data` as the RMW's own bytes (cdr.py) where it writes them, else in `message`."""
+        if self.serialized and self._c_strings(data):
+            sec, nanosec = split_stamp(data.stamp_ns)
+            publisher.publish(joint_state_bytes(sec, nanosec, data.frame_id, data.name,
+                                                data.position, data.velocity, data.effort))
+        else:
+            publisher.publish(to_joint_state(data, message))
+
+    def _c_strings(self, data: JointStateData) -> bool:
+        """No NUL in frame_id or the names: the RMW ends a string at its first NUL, cdr.py
+        writes it whole. Asked again only when they are other objects (a parameter set)."""
+        if data.frame_id is not self._strings[0] or data.name is not self._strings[1]:
+            self._strings = (data.frame_id, data.name, all(
+                "\0" not in text for text in (data.frame_id, *data.name)))
+        return self._strings[2]
 
     def _publish_clock(self) -> None:
         if self.core.config.values["publish_clock"]:

@@ -29,7 +29,7 @@ from cyclonedds.idl.types import (array, bounded_str, float64, int32, sequence, 
 from cyclonedds.qos import Policy, Qos  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
-from .cdr import LITTLE_ENDIAN, joint_state_cdr  # noqa: E402
+from .cdr import LITTLE_ENDIAN, clock_cdr, joint_state_cdr  # noqa: E402
 from .errors import (DiscoveryError, check_topic_name, cyclone_messages,
                      cyclone_reason, refused_configuration, static_peers)  # noqa: E402
 
@@ -47,6 +47,12 @@ class Time(IdlStruct, typename="builtin_interfaces.msg.dds_.Time_"):
 @dataclass
 class Clock(IdlStruct, typename="rosgraph_msgs.msg.dds_.Clock_"):
     clock: Time = field(default_factory=Time)     # /clock, as Gazebo publishes it
+
+    def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
+        # written every tick: the generic serializer's XCDR1 bytes, one struct.pack (cdr.py)
+        if buffer is None and endianness is None and not use_version_2 and LITTLE_ENDIAN:
+            return clock_cdr(self.clock.sec, self.clock.nanosec)
+        return super().serialize(buffer, endianness, use_version_2)
 
 
 @final
@@ -90,7 +96,7 @@ class JointState(IdlStruct, typename="sensor_msgs.msg.dds_.JointState_"):
     effort: sequence[float64] = field(default_factory=list)
 
     def serialize(self, buffer=None, endianness=None, use_version_2=None) -> bytes:
-        # written every tick: the same XCDR1 bytes as the generic serializer, 10x faster
+        # written every tick: the generic serializer's XCDR1 bytes, one struct.pack (cdr.py)
         if buffer is None and endianness is None and not use_version_2 and LITTLE_ENDIAN:
             return joint_state_cdr(self)
         return super().serialize(buffer, endianness, use_version_2)

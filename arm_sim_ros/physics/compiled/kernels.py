@@ -92,7 +92,7 @@ def run_loop(**parts) -> str:
 BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
     NAME='run_books', MORE='', NEXT='new_every', AFTER='',
     DOC='''Up to `left` steps of Simulator.step from y (in place), the books in I and F (read
-    and written back; compiled.Kernel names them), the shadow's state z, its local error L
+    and written back; runs.Kernel names them), the shadow's state z, its local error L
     and offset O; G scratch, S the state the latest divergence check found sound.
     (steps taken, code: 0 all taken, 1 the next step is Python's, 2 the last step's
     divergence check is Python's; the step of the latest sound check or -1).''',
@@ -281,7 +281,7 @@ def booked(L, G, states, n, wanted, orderf):
 @njit(cache=True)
 def handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
            largest, far, in_play, estimate, previous):
-    """The run's state, shadow and books written back for Python (compiled.Kernel)."""
+    """The run's state, shadow and books written back for Python (runs.Kernel)."""
     for k in range({width}):
         y[k], z[k] = state[k], shade[k]
     I[0], I[1], I[2], I[3], I[4], I[5] = steps, due, since, taken, n, every

@@ -15,11 +15,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..trust import accuracy
+from ..trust.unestimated import Off
 from ..switching.events import STEEP
 
 
 class Switched:
-    """The compiled runs of a switching scene's modes (compiled.Steps compiles each mode's
+    """The compiled runs of a switching scene's modes (runs.Steps compiles each mode's
     module, its switching run included, when the run first meets the mode)."""
 
     def __deepcopy__(self, memo):   # compiled machinery and scratch: shared by copies
@@ -30,22 +31,25 @@ class Switched:
         self.X, self.E = np.zeros(4), np.zeros(8)
 
     def run(self, kernel, sim, left: int, largest: float):
-        """(steps taken, largest |residual|, code) as compiled.Kernel.books_run: code 1,
+        """(steps taken, largest |residual|, code) as runs.Kernel.books_run: code 1,
         with no step taken, where Python must take the next step."""
         books, stepper = sim.accuracy, sim.switching
         compiled = self.ready(sim, books, stepper)
         if compiled is None:
             return 0, largest, 1
         module, K = compiled
-        friction, mode = stepper.friction, stepper.mode
+        friction, mode, off = stepper.friction, stepper.mode, isinstance(books, Off)
         edge = STEEP * (friction.stribeck_velocity or 0.0) if friction is not None else 0.0
-        self.X[:] = (edge > 0.0 and mode[0] in ("+", "-"), edge > 0.0 and mode[1] in ("+", "-"),
-                     edge, self.driven)
-        since = books.since
+        steep = edge > 0.0 and not off           # a sliding joint in Stribeck's dip: checked
+        self.X[:] = (steep and mode[0] in ("+", "-"), steep and mode[1] in ("+", "-"), edge,
+                     self.driven)
+        since = getattr(books, "since", 0)
         done, largest, code = kernel.books_run(sim, books, left, largest, module.run_switching,
                                                K, (self.X, self.E, kernel.D))
         if done:
             stepper.last = sim.state             # the mode goes on from here
+            if off:
+                return done, largest, code
             if books.shadow.last is sim.state:
                 books.twin.last = books.shadow.shadow
             if books.since != since and books.tolerance:
@@ -54,22 +58,32 @@ class Switched:
 
     def ready(self, sim, books, stepper):
         """(the current mode's module, its K), or None where the next step is Python's."""
-        if sim.diverged or sim.sampled is not None or not isinstance(books, accuracy.Accuracy) \
-                or books.stepper is not stepper or stepper.last is not sim.state:
+        if sim.diverged or sim.sampled is not None or not isinstance(
+                books, (accuracy.Accuracy, Off)) or books.stepper is not stepper or \
+                stepper.last is not sim.state:
             return None
-        mode, twin, shadow = stepper.mode, books.twin, books.shadow
-        if mode[2] or mode[3] or stale(stepper) or not (
-                books.free.n == books.substeps == stepper.substeps):
+        mode = stepper.mode
+        if mode[2] or mode[3] or stale(stepper) or books.substeps != stepper.substeps:
             return None
-        followed = shadow.local is not None and not shadow.lost and sim.state is shadow.last
-        if followed and (twin is None or twin.mode != mode or twin.last is not shadow.shadow
-                         or stale(twin)):
+        if not isinstance(books, Off) and not self.followed(sim, books, mode):
             return None
         rhs, _, _, kinds, _ = stepper.functions(mode)
         if not kinds or not getattr(rhs, "guards_source", ""):
             return None
         module, K = self.steps.module(rhs)
         return None if module is None else (module, K)
+
+
+    @staticmethod
+    def followed(sim, books, mode) -> bool:
+        """The error books' count is the stepper's, and the shadow, where it is followed,
+        steps by a twin in the same mode."""
+        twin, shadow = books.twin, books.shadow
+        if books.free.n != books.substeps:
+            return False
+        followed = shadow.local is not None and not shadow.lost and sim.state is shadow.last
+        return not followed or (twin is not None and twin.mode == mode and
+                                twin.last is shadow.shadow and not stale(twin))
 
 
 def stale(stepper) -> bool:

@@ -35,10 +35,12 @@ BUILDERS = {"motors": Motors, "friction": Friction, "joint_limits": JointLimits.
 COMPENSATING = ("gravity_compensation", "command_gravity_compensation")
 
 
-def scene_effects(scene, command=None) -> list[Effect]:
+def scene_effects(scene, command=None, acting=None) -> list[Effect]:
     """The scene's effects in assembly order: gravity (its g1, g2 feed compensation), the
     controller's model, the drive chain (policy → effort limits → motor windings), then the
-    passive forces. `command` is the list the command policies read."""
+    passive forces. `command` is the list the command policies read; `acting`, under a
+    control loop (physics/sensing/loop.py), the torque list the drive reads instead (the
+    loop evaluates the policy, the controller's model included, at the readings)."""
     arm, effects = scene.arm, []
     if scene.gravity != 0.0:
         effects.append(Gravity(scene.gravity))
@@ -51,10 +53,11 @@ def scene_effects(scene, command=None) -> list[Effect]:
                 else _servo(scene, arm, believed, command, windings))
     # A request that depends on the state (compensation) crosses its clamps inside a step:
     # they switch as located events then; else the clamp is constant within the step.
-    located = actuator is not None and actuator.compensates
+    located = actuator is not None and actuator.compensates and acting is None
     if actuator is not None:
-        if believed is not None and actuator.compensates:
+        if believed is not None and located:
             effects.append(believed)
+        actuator.acting = acting
         effects.append(actuator)
         if scene.effort_limits is not None and scene.servo is None:   # the servo clamps
             effects.append(EffortLimits(scene.effort_limits, switching=located))

@@ -20,6 +20,7 @@ CHECKS = {  # check name: (test, what the value must be)
     "any": (lambda v: True, "finite"),
     "positive": (lambda v: v > 0, "positive"),
     "non-negative": (lambda v: v >= 0, "non-negative"),
+    "whole": (lambda v: 0 <= v < 2 ** 63 and v % 1 == 0, "a whole number from 0 to 2^63 - 1"),
 }
 
 
@@ -28,8 +29,8 @@ class Parameter:
     """One scene key of an effect: `<effect>.<name>` in a scene file, --set and ROS params."""
 
     name: str
-    kind: str              # "pair" (one value per joint), "float", or "names" (one of
-    unit: str              # `choices` per joint)
+    kind: str              # "pair" (one value per joint), "float", "names" (one of
+    unit: str              # `choices` per joint) or "choice" (one of `choices`)
     check: str = "any"
     default: object = REQUIRED
     description: str = ""
@@ -40,6 +41,12 @@ class Parameter:
         label = effect if effect == self.name else f"{effect}.{self.name}"   # effort_limits
         if self.kind == "names":
             return self._names(label, value)
+        if self.kind == "choice":
+            value = "true" if value is True else value       # YAML reads `true` as a bool
+            if not isinstance(value, str) or value not in self.choices:
+                raise ParameterError(f"{label} = {brief(value)} is not one of "
+                                     f"{', '.join(self.choices)}")
+            return value
         if self.kind == "pair":
             if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
                 raise ParameterError(f"{label} must be a list of two numbers ({self.unit}), "

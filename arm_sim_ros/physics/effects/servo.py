@@ -1,11 +1,12 @@
 """Joint servos: a PID per joint turns a position or velocity set-point into the joint torque.
 
 Scene: `servo: {interface: [position, velocity], kp: [..], ki: [..], kd: [..]}`, optional
-`integral_limit` (N m) and `tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
+`velocity_kp`, `velocity_ki` (a velocity joint's own gains), `integral_limit` (N m) and
+`tracking` (1/s). Per joint i, with the set-points qᵢ*, q̇ᵢ*:
 
 - position: eᵢ = qᵢ* − qᵢ,  rᵢ = kpᵢ eᵢ + kdᵢ (q̇ᵢ* − q̇ᵢ) + clamp(wᵢ, ±Wᵢ)
-- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ)          (kd must be 0: it would
-  act on the acceleration the torque causes)
+- velocity: eᵢ = q̇ᵢ* − q̇ᵢ, rᵢ = kpᵢ eᵢ + clamp(wᵢ, ±Wᵢ) with the velocity gains (velocity_kp,
+  velocity_ki; else kp, ki) and no kd (it would act on the acceleration the torque causes)
 - effort:   rᵢ = the commanded torque (the command policies) or the scene's `setpoint`
 
 plus the believed gravity torque under command_gravity_compensation (feed-forward). The
@@ -31,6 +32,7 @@ steps its integral by forward Euler, wᵢ += T (kiᵢ eᵢ + bᵢ (τᵢ − r�
 discrete back-calculation). A sample inside a step splits the step there (sampled_step), so
 within each piece the torque is a constant and RK4 keeps its order; the integrals stay in
 the state (their rate 0 between samples) and the held torque is the `work` as before.
+Under a control loop (physics/sensing/loop.py) the loop takes the samples, at the readings.
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from math import ceil, isfinite, pi, sqrt
 
 from ..model import ParameterError, mass_matrix
 from ..stepping.stability import worst_stiffness
-from .actuator import Actuator
+from .actuator import ACTING, Actuator
 from .base import Parameter
 
 INTERFACES = ("position", "velocity", "effort")
@@ -58,6 +60,10 @@ class Servo(Actuator):
                   description="integral gain"),
         Parameter("kd", "pair", "N m s/rad", "non-negative", default=(0.0, 0.0),
                   description="derivative gain on the velocity error (position joints)"),
+        Parameter("velocity_kp", "pair", "N m s/rad", "non-negative", default=None,
+                  description="proportional gain of a velocity joint (none = kp)"),
+        Parameter("velocity_ki", "pair", "N m/rad", "non-negative", default=None,
+                  description="integral gain of a velocity joint (none = ki)"),
         Parameter("integral_limit", "pair", "N m", "positive", default=None,
                   description="largest integral torque (none = only the anti-windup)"),
         Parameter("tracking", "pair", "1/s", "positive", default=None,
@@ -68,24 +74,25 @@ class Servo(Actuator):
     )
 
     def __init__(self, interface=("position", "position"), kp=(0.0, 0.0), ki=(0.0, 0.0),
-                 kd=(0.0, 0.0), integral_limit=None, tracking=None, rate=None, *,
-                 policy="setpoint", setpoint=(0.0, 0.0), initial_positions=(0.0, 0.0),
-                 effort_limits=None, command=None, compensation=None, work_kind="input",
-                 believed="g", step_size=None):
-        for i, (kind, d) in enumerate(zip(interface, kd)):
-            if kind == "velocity" and d != 0.0:
-                raise ParameterError(f"servo.kd[{i}] = {d:g} on a velocity joint would act on "
-                                     "the acceleration; a velocity servo takes kp and ki")
+                 kd=(0.0, 0.0), velocity_kp=None, velocity_ki=None, integral_limit=None,
+                 tracking=None, rate=None, *, policy="setpoint", setpoint=(0.0, 0.0),
+                 initial_positions=(0.0, 0.0), effort_limits=None, command=None,
+                 compensation=None, work_kind="input", believed="g", step_size=None):
         if policy not in SERVO_POLICIES:
             raise ParameterError(f"servo needs policy {', '.join(SERVO_POLICIES)}, not "
                                  f"{policy!r}")
-        self.interface, self.kp, self.ki, self.kd = tuple(interface), kp, ki, kd
+        self.interface = tuple(interface)
+        # each joint the gains of its interface (a switch back finds them): velocity, no kd
+        on_velocity = [kind == "velocity" for kind in interface]
+        self.kp = tuple(v if on else p for on, p, v in zip(on_velocity, kp, velocity_kp or kp))
+        self.ki = tuple(v if on else i for on, i, v in zip(on_velocity, ki, velocity_ki or ki))
+        self.kd = tuple(0.0 if on else d for on, d in zip(on_velocity, kd))
         self.integral_limit, self.effort_limits = integral_limit, effort_limits
         self.tracking = tracking or tuple(i / p if i > 0 and p > 0 else 1.0
-                                          for i, p in zip(ki, kp))
+                                          for i, p in zip(self.ki, self.kp))
         self.policy, self.compensation, self.work_kind = policy, compensation, work_kind
         self.compensates = policy == "command_gravity_compensation"
-        self.believed, self.fixed = believed, None
+        self.believed, self.fixed, self.acting = believed, None, None
         self.command = command if command is not None else [0.0, 0.0]
         # [q1*, q2*, q̇1*, q̇2*, τ1*, τ2*]: read at every stage, written between steps
         self.setpoint = [*initial_positions, 0.0, 0.0, 0.0, 0.0]
@@ -99,7 +106,13 @@ class Servo(Actuator):
         self.every, self.grid = sample_grid(rate, step_size) if timed else (None, None)
         self.shadow_held = [0.0, 0.0]    # what it holds in the error books' shadow (shadow.py)
 
+    @property
+    def discrete(self) -> bool:     # sampled: by its rate, or by a control loop
+        return bool(self.rate) or self.acting is not None
+
     def constants(self, arm) -> dict:
+        if self.acting is not None:
+            return {"command": self.acting}
         out = {"command": self.command, "SP": self.setpoint} | (
             {"HELD": self.held} if self.rate else {})
         for i in (0, 1):
@@ -113,8 +126,8 @@ class Servo(Actuator):
         return out
 
     def terms(self) -> list[str]:
-        if self.rate:               # held since the latest sample: a constant in the step
-            return ["t1 = HELD[0]", "t2 = HELD[1]"]
+        if self.discrete:           # held since the latest sample: a constant in the step
+            return [ACTING] if self.acting is not None else ["t1 = HELD[0]", "t2 = HELD[1]"]
         lines = []
         for i in (0, 1):
             j, kind = i + 1, self.interface[i]
@@ -138,11 +151,11 @@ class Servo(Actuator):
     def rates(self) -> list[str]:
         # no integral action (ki = 0, an effort joint): the integral stays where it is
         return [f"KI{j} * e{j} + KB{j} * (ts{j} - r{j} + wc{j} - integral{j})"
-                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 and not self.rate
+                if self.interface[j - 1] != "effort" and self.ki[j - 1] > 0 and not self.discrete
                 else "0.0" for j in (1, 2)]    # a discrete servo's: stepped at its samples
 
     def stiffness(self, arm) -> float:
-        if self.rate:               # a constant torque within the step: nothing to resolve
+        if self.discrete:           # a constant torque within the step: nothing to resolve
             return 0.0
         # Velocity feedback (kd on a position joint, kp on a velocity joint) is a damper;
         # the back-calculation a decay of the integral at rate b.
@@ -151,7 +164,7 @@ class Servo(Actuator):
         return damping * worst_stiffness(arm) + max(self.tracking)
 
     def frequency(self, arm) -> float:
-        if self.rate:
+        if self.discrete:
             return 0.0
         # kp on a position joint (ki on a velocity joint) is a spring; ki on a position joint
         # adds a slower third pole, bounded by the same spring scale.
@@ -180,7 +193,9 @@ class Servo(Actuator):
 
     def requested_torque(self, state):
         """τᵢ = clamp(rᵢ, ±eᵢ) at `state` (q, q̇, integrals first), as the servo asks now (a
-        discrete servo: what it holds)."""
+        discrete servo: what it holds; under a control loop: what acts now)."""
+        if self.acting is not None:
+            return tuple(self.acting)
         return tuple(self.held if self.rate else self.law(state, torque_only=True))
 
     def sample(self, state, held) -> tuple:
@@ -209,12 +224,7 @@ class Servo(Actuator):
     def beside(self, advance, f, z, h):
         """advance(f, z, h) under the shadow's held torque: the shadow follows the true motion,
         whose servo samples the true state, not the motion's."""
-        mine = self.held[:]
-        self.held[:] = self.shadow_held
-        try:
-            return advance(f, z, h)
-        finally:
-            self.held[:] = mine
+        return advanced_under(self.held, self.shadow_held, advance, f, z, h)
 
     def hold(self, q, joints=(0, 1)) -> None:
         """Set-points from the state: a position joint holds `q`, a velocity joint stops."""
@@ -239,6 +249,17 @@ class Servo(Actuator):
                 w = min(max(w, -self.integral_limit[i]), self.integral_limit[i])
             integrals.append(w)
         return tuple(integrals)
+
+
+def advanced_under(torque: list, other, advance, f, z, h):
+    """advance(f, z, h) with the list the generated code reads a torque from (`torque`) holding
+    `other` meanwhile: the error estimate's shadow stepped under its own torque."""
+    mine = torque[:]
+    torque[:] = other
+    try:
+        return advance(f, z, h)
+    finally:
+        torque[:] = mine
 
 
 def sample_grid(rate: float, step_size: float) -> tuple:
@@ -314,9 +335,10 @@ def sample(sim, y) -> tuple:
 
 
 def sampled(dynamics) -> Servo | None:
-    """The scene's servo if it is a discrete one (a `rate`), else None."""
+    """The scene's servo if it is a discrete one (a `rate`) sampling itself, else None."""
     joint_servo = servo_of(dynamics)
-    return joint_servo if joint_servo is not None and joint_servo.rate else None
+    return joint_servo if joint_servo is not None and joint_servo.rate and \
+        joint_servo.acting is None else None
 
 
 def servo_of(dynamics) -> Servo | None:

@@ -33,6 +33,7 @@ from ..stepping import stability
 from .controller import SAFETY, Control, retake, said_count, said_lost, said_unreachable
 from ..stepping.integrators import compile_step
 from .shadow import FIRST_EVERY, ROUNDING, Shadow, Twin, next_every
+from .unestimated import Off, Unchecked
 
 NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
 TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
@@ -349,36 +350,17 @@ class Embedded:
         return y1
 
 
-class Unchecked:
-    """No estimate (NaN): steps the stability plan refuses, and dopri5 on a scene that switches
-    modes (`stepper`)."""
-
-    error_estimate = float("nan")
-    due = 0
-    shadow = None             # no global estimate: books after these start afresh
-
-    def __init__(self, advance, substeps: int, stepper=None):
-        self.check = self.plain = advance
-        self.substeps, self.stepper = substeps, stepper
-
-    def reset(self) -> None:
-        pass
-
-    def accumulated(self) -> float:
-        return self.error_estimate
-
-    def taken(self, steps: int) -> int:
-        return (steps * self.substeps if self.substeps > 1 else 0) + (
-            self.stepper.extra_substeps if self.stepper is not None else 0)
-
-
 def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
          clock=None, stepper=None, previous=None, cap: int = DEFAULT_MAX_SUBSTEPS,
-         states: int = 4, twin=None):
+         states: int = 4, twin=None, estimate: str = "global"):
     """The error books, with the step they take (`step` as the stability plan's `substeps`
     equal sub-steps): the embedded pair's own estimate, or checked equal sub-steps (over the
-    stability plan's) of a fixed-step method, switched at events by `stepper` if any.
-    `previous`: the books so far (a payload grasped rebuilds the dynamics mid-run)."""
+    stability plan's) of a fixed-step method, switched at events by `stepper` if any; with
+    `estimate` off, the planned steps alone (unestimated.Off). `previous`: the books so far
+    (a payload grasped rebuilds the dynamics mid-run)."""
+    if estimate == "off":
+        return Off(stepper.advance if stepper is not None else
+                   stability.substepping(step, substeps), substeps, stepper)
     if getattr(tableau, "adaptive", False) and stepper is not None:
         # dopri5 between located switches: its pieces' own estimates are not summed (NaN);
         # without the switches its error control would chase the kink forever.

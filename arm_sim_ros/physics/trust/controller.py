@@ -69,8 +69,8 @@ def said_count(books, wanted, first, h, reached=None, where="") -> None:
                    f"at the cap of {books.cap} sub-steps per step (max_substeps); the run "
                    "goes on at the cap")
     elif wanted > books.most and wanted > 2 * max(1, books.most):
-        books.most = wanted     # the tolerance at work, as it is built to: "tolerance", info
-        books.emit("tolerance", f"local error {first / h:.3g} per s (scaled) for "
+        books.most = wanted     # the tolerance at work, as it is built to: "substeps", info
+        books.emit("substeps", f"local error {first / h:.3g} per s (scaled) for "
                    f"tolerance {books.tolerance:g} (aiming at half): each {h:g} s "
                    f"step{where} is taken as {wanted} sub-steps")
 

@@ -38,7 +38,7 @@ from math import asin, degrees
 import numpy as np
 
 from ..model import MAX_ANGLE
-from ..scene import Scene, SceneError
+from ..scene import FIELD_KINDS, Scene, SceneError
 from .elements import child_link, element_origin, joint_axis, joint_name, link_mass, read_number
 
 TOLERANCE = 1e-4
@@ -350,3 +350,16 @@ class _Tree:
             if along > 0 and np.linalg.norm(t - along * direction) <= TOLERANCE * along:
                 best = along if best is None else max(best, along)
         return best
+
+
+def changed_values(scene: "Scene", other: "Scene") -> list[str]:
+    """`key old -> new` for every value `other` changed (a table shown by its keys only), e.g.
+    what a URDF replaced."""
+    def shown(value):
+        if isinstance(value, tuple):
+            return "(" + ", ".join(f"{v:g}" for v in value) + ")"
+        if isinstance(value, dict):
+            return "{" + ", ".join(value) + "}"
+        return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
+    return [f"{key} {shown(getattr(scene, key))} -> {shown(getattr(other, key))}"
+            for key in FIELD_KINDS if key != "name" and getattr(scene, key) != getattr(other, key)]

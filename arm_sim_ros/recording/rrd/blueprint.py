@@ -12,9 +12,10 @@ import unicodedata
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ...physics.effects import MAPPING_EFFECTS, EffortLimits
-from ...physics.scene import changed_values, load_scene, preset_names
-from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, SUBSTEPS,
+from ...physics.effects import EffortLimits
+from ...physics.scene import MAPPINGS, load_scene, preset_names
+from ...physics.urdf.read import changed_values
+from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, MEASURED, SUBSTEPS,
                         accuracy_paths, channel_path, extra_paths, stored_path)
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
@@ -61,6 +62,9 @@ JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow ambe
 NO_LEGEND = rrb.PlotLegend(visible=False)
 COMMANDED_SERIES = ("τ1 commanded", "τ2 commanded")
 COMMANDED_COLORS = ((40, 130, 255), (255, 110, 40))  # beside the applied torque's cyan, amber
+# With sensors the readings are drawn narrow over the truth, which is drawn wide beneath.
+MEASURED_SERIES = {"joints/angle": ("q1 measured", "q2 measured"),
+                   "joints/velocity": ("q̇1 measured", "q̇2 measured")}
 # The node's story, one row per tick (node/recorder_link.py): (view title, series name,
 # unit, colour).
 NODE_SERIES = {
@@ -86,6 +90,7 @@ STEPPED = {path: rr.components.InterpolationMode.StepBefore
            for path in (SUBSTEPS, "node/substeps")}
 UNITS = {"energy": "J", "books": "J", "joints/angle": "rad", "joints/velocity": "rad/s",
          "joints/torque": "N m", COMMANDED: "N m", "joints/current": "A",
+         MEASURED["joints/angle"]: "rad", MEASURED["joints/velocity"]: "rad/s",
          "accuracy": "rad, rad/s", SUBSTEPS: "1/step"}
 TRACE_COLOR = (190, 190, 190)     # neutral: violet is the residual's
 HORIZON_COLOR = (100, 100, 100)
@@ -127,7 +132,10 @@ def series(snap) -> dict:
                                          (WIDE if kind == "input" else NARROW,))
     for path in joint_paths(snap):
         names = joint_series(path)[1]
-        out[path] = (names, JOINT_COLORS[:len(names)], (NARROW,) * len(names))
+        wide = WIDE if snap.measured and path in MEASURED else NARROW
+        out[path] = (names, JOINT_COLORS[:len(names)], (wide,) * len(names))
+        if snap.measured and path in MEASURED:
+            out[MEASURED[path]] = (MEASURED_SERIES[path], COMMANDED_COLORS, (NARROW, NARROW))
     if snap.commanded:
         out[COMMANDED] = (COMMANDED_SERIES, COMMANDED_COLORS, (NARROW, NARROW))
     for path in accuracy_paths(snap):
@@ -182,6 +190,9 @@ def torque_view(snap, path: str) -> rrb.TimeSeriesView:
     if path == "joints/torque" and snap.commanded:   # short: four such panes share a row
         return rrb.TimeSeriesView(name="Torque & command (N m)", contents=[path, COMMANDED],
                                   plot_legend=NO_LEGEND)
+    if snap.measured and path in MEASURED:     # the readings drawn over the truth
+        return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}: measured over true",
+                                  contents=[path, MEASURED[path]])
     return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}", origin=path,
                               plot_legend=NO_LEGEND)
 
@@ -290,20 +301,20 @@ def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
 # --- the effects document ---------------------------------------------------------------
 
 def _value(value) -> str:
-    if isinstance(value, tuple):
-        return ", ".join(f"{v:g}" for v in value)
+    if isinstance(value, tuple):      # numbers, or names (a servo's interfaces)
+        return ", ".join(_value(v) for v in value)
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def _unit(unit: str) -> str:
-    return "" if unit == "1" else unit.replace("^2", "²")
+def _unit(unit: str) -> str:      # a table cell: choices a|b as a/b
+    return "" if unit == "1" else unit.replace("^2", "²").replace("|", "/")
 
 
 def effect_rows(snap, effect) -> list[tuple[str, str, str]]:
     """(parameter, value, unit) of one effect, as the scene gave them."""
     scene, name = snap.scene, effect.name
-    if name in MAPPING_EFFECTS:
-        units = {p.name: p.unit for p in MAPPING_EFFECTS[name].parameters}
+    if name in MAPPINGS:
+        units = {p.name: p.unit for p in MAPPINGS[name].parameters}
         rows = [(key, _value(v), _unit(units.get(key, "")))
                 for key, v in (getattr(scene, name) or {}).items() if v is not None]
         if name == "motors":
@@ -347,6 +358,12 @@ def effects_document(snap) -> str:
                   for i, (p, v, u) in enumerate(rows)]
     if not snap.effects:
         lines.append("| none: the bare arm | | | |")
+    units = {p.name: p.unit for p in MAPPINGS["sensors"].parameters}
+    sensing = [(key, _value(v), _unit(units[key])) for key, v in (scene.sensors or {}).items()
+               if v is not None] + ([("command_delay", _value(scene.command_delay), "s")]
+                                    if scene.command_delay else [])
+    lines += [f"| {'sensors, latency' if i == 0 else ''} | {p} | {v} | {u} |"
+              for i, (p, v, u) in enumerate(sensing)]
     kinds = snap.kinds.items()
     lines += ["", "**Energy books (J)**: E(t) − E(0) = inputs − losses + residual", "",
               f"- E: {' + '.join(snap.parts)}"]

@@ -6,6 +6,7 @@ it recorded without the YAML it came from. Read back with readback.properties().
     integrator   the Butcher tableau (c, a row by row, b), its order, the step and sub-steps
     effects      the effects the scene calls for, in assembly order
     effect.<e>   one effect's parameters: parameter, value and unit, as the effects document
+    estimate     what the run computes of its own error: mode (global, off) and its meaning
     clock        the timelines and how they relate: ros_time = stamp_origin_ns + sim_time
     units        each series' entity path and unit
 """
@@ -17,6 +18,7 @@ import json
 import rerun as rr
 
 from ...physics.stepping.integrators import INTEGRATORS
+from ...physics.trust.unestimated import NO_ESTIMATE
 from .blueprint import LOG_TIME, ROS_TIME, TIMELINE, effect_rows, node_series, series, unit
 
 
@@ -49,6 +51,14 @@ def integrator_values(sim) -> dict:
     return values
 
 
+def estimate_values(scene) -> dict:
+    """What the run computes of its own error (scene key estimate), said in words."""
+    if scene.estimate == "off":
+        return {"mode": "off", "meaning": NO_ESTIMATE + ": no shadow, no local error checks"}
+    return {"mode": scene.estimate, "meaning": "the global error estimate: a shadow beside "
+            "every step, the local error measured on a schedule (accuracy/* series)"}
+
+
 def properties(snap, sim, stamp_origin_ns: int | None, node: bool = False) -> list:
     """(name, rr.AnyValues) of each recording property of a run of `sim` (`snap`: its
     readouts.Snapshot)."""
@@ -61,6 +71,7 @@ def properties(snap, sim, stamp_origin_ns: int | None, node: bool = False) -> li
             parameter, value, unit_ = (list(column) for column in zip(*rows))
             out.append((f"effect.{effect.name}",
                         rr.AnyValues(parameter=parameter, value=value, unit=unit_)))
+    out.append(("estimate", rr.AnyValues(**estimate_values(sim.scene))))
     clock = {"timelines": [TIMELINE, LOG_TIME] + ([ROS_TIME] if stamp_origin_ns is not None
                                                   else []),
              "source": "node" if node else "arm-sim run"}

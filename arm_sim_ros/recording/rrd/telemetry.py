@@ -41,6 +41,7 @@ import rerun as rr
 
 from .arm3d import arm3d_for
 from .blueprint import blueprint
+from ...physics.simulator import recorded_row
 from ..readouts import Snapshot, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks
 from .static_data import StaticData
@@ -119,7 +120,7 @@ class RerunRecorder:
 
     def step(self, sim) -> None:
         """After a physics step: keep its state and its error books (see step_batch)."""
-        self.step_batch(sim, (sim.state,))
+        self.step_batch(sim, (recorded_row(sim),))
 
     def step_batch(self, sim, states, books=(), last=None) -> None:
         """After len(states) physics steps: their states in order, the last being sim.state
@@ -343,7 +344,7 @@ def with_last(books, sim) -> list:
 
 def start_line(sim) -> str:
     """The text-log line a run starts with: what runs, and what holds its error."""
-    estimate = ("" if sim.error_estimate == sim.error_estimate
+    estimate = ("" if sim.error_estimate == sim.error_estimate or sim.scene.estimate == "off"
                 else ", no error estimate: the simulator does not estimate these steps")
     return (f"scene {sim.scene.name} start: policy {sim.scene.policy}, effects "
             f"{'+'.join(sim.dynamics.effects) or 'none'}, h = {sim.step_size:g} s, "

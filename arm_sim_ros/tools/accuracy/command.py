@@ -4,20 +4,20 @@ Each method runs the scene at several step sizes (embedded pairs: several tolera
 the scene's publish step) and is compared with a high-accuracy reference, scipy's DOP853
 at rtol = atol = 1e-13, at the same physical times. The reference is built from
 `model.forward_dynamics`, not from the generated right-hand side, so it also checks that
-code. Reported per run: max state error, energy drift, balance residual, right-hand-side
-evaluations and CPU seconds per simulated second; per fixed-step method, the fitted
-convergence order.
+code. Reported per run: max state error, energy drift, balance residual, sub-steps taken,
+CPU seconds per simulated second, its path and its estimate mode; per fixed-step method, the
+fitted convergence order.
 
-Beside the methods' sweeps (the tableau's step, timed bare): the scene as set and a sweep of
-the scene key `tolerance` for the fixed-step methods of order >= 3, both run through
-`Simulator.step` (what `arm-sim run` and the node pay, estimator and sub-steps included),
-and MuJoCo's integrators on the same scene at the same step sizes (mujoco_peer.py), each
-compared with the same reference at the same times and timed the same way: CPU time of a
-Python loop of one call per step that keeps the samples, the fastest of --repeat runs.
-Scenes that switch modes (friction, joint limits) are run through `Simulator.step` only,
-and their reference is our rk4 at a fine step with every switch located (checked against
-itself at half the step; test/physics/test_friction_limits.py checks it against an independent
-hybrid reference).
+Every run of ours goes through `Simulator.run` on the path the user has (compiled where
+numba is installed), once with the error estimate (`estimate` global, tolerance 0: the
+estimate alone) and once without (off), at the same steps; beside them the scene as set,
+a sweep of the scene key `tolerance` for the fixed-step methods of order >= 3, and the
+node's path (the scene as set through `Simulator.step`, a Python call per step). MuJoCo's
+integrators run the same scene at the same step sizes (mujoco_peer.py), priced twice: mj_step
+in a Python loop and mujoco.rollout. A run's price is the CPU time of the whole run, the
+fastest of its calls over --repeat rounds in which every run of the scene is called in turn,
+call by call (timing.py), so that the same trajectory costs the same in every series. Scenes that switch modes (friction, joint limits)
+have a reference that locates every switch (independent.py, runs.hybrid_reference).
 """
 from __future__ import annotations
 
@@ -33,8 +33,9 @@ from ...usage import UsageError
 from . import report as report
 from . import mujoco_peer
 from .report import TARGET, cheapest  # noqa: F401  (part of the study's interface)
-from .runs import (Run, measure, measure_mujoco, measure_simulator, reference,
-                   reference_and_label, sample_times)  # noqa: F401
+from . import timing
+from .runs import (ESTIMATES, Run, measure, measure_mujoco, measure_node,  # noqa: F401
+                   measure_simulator, reference, reference_and_label, sample_times)
 from ..arguments import add_scene_arguments, scene_from_args
 from ..progress import Progress
 
@@ -70,24 +71,28 @@ def has_estimate(scene: Scene) -> bool:
     return estimate == estimate                 # NaN: the stability plan refuses the steps
 
 
-def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers, repeat):
-    """[(label, run thunk)] of every run of the study, and the notes on what was left out."""
+def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers):
+    """[(label, measure thunk: [timing.Priced])] of every run of the study, the node's path
+    included, and the notes on what was left out."""
     fixed = [n for n in integrators if not INTEGRATORS[n].adaptive]
     adaptive = [n for n in integrators if INTEGRATORS[n].adaptive]
-    plan = [(f"{n} h={h:g}", lambda n=n, h=h: measure(scene, n, h, None, times, ref, repeat))
-            for n in fixed for h in steps]
-    plan += [(f"{n} tol={t:g}", lambda n=n, t=t: measure(scene, n, scene.step_size, t, times,
-                                                          ref, repeat))
-             for n in adaptive for t in tolerances]
-    plan.append(("as set", lambda: measure_simulator(scene, times, ref, repeat, "as set")))
+    plan = [(f"{n} h={h:g}, estimate {e}", lambda n=n, h=h, e=e: [
+        measure(scene, n, h, None, times, ref, e)])
+        for n in fixed for e in ESTIMATES for h in steps]
+    plan += [(f"{n} tol={t:g}, estimate {e}", lambda n=n, t=t, e=e: [
+        measure(scene, n, scene.step_size, t, times, ref, e)])
+        for n in adaptive for e in ESTIMATES for t in tolerances]
+    plan.append(("as set", lambda: [measure_simulator(scene, times, ref, "as set")]))
+    plan.append(("the node's path", lambda: [measure_node(scene, times, ref)]))
     notes = []
     swept = [n for n in fixed if INTEGRATORS[n].order >= SWEEP_MIN_ORDER]
-    if sweep and swept and not has_estimate(scene.replace(integrator=swept[0])):
+    if sweep and swept and not has_estimate(scene.replace(integrator=swept[0], tolerance=0.0,
+                                                          estimate="global")):
         notes.append("tolerance sweep: none (the stability plan refuses this scene's steps, "
                      "so they carry no error estimate and a tolerance does not act)")
         swept = []
-    plan += [(f"{n} tolerance={t:g}", lambda n=n, t=t: measure_simulator(
-        scene.replace(integrator=n, tolerance=t), times, ref, repeat, "tolerance"))
+    plan += [(f"{n} tolerance={t:g}", lambda n=n, t=t: [measure_simulator(
+        scene.replace(integrator=n, tolerance=t, estimate="global"), times, ref, "tolerance")])
         for n in swept for t in sweep]
     peer = {}
     if "mujoco" in peers:
@@ -99,7 +104,7 @@ def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers, r
         if "notes" in peer:
             peer["version"] = mujoco_peer.version()
             plan += [(f"mujoco {i} h={h:g}", lambda i=i, h=h: measure_mujoco(
-                scene, i, h, times, ref, repeat)) for i in mujoco_peer.INTEGRATORS for h in steps]
+                scene, i, h, times, ref)) for i in mujoco_peer.INTEGRATORS for h in steps]
         else:
             notes.append(f"MuJoCo: {peer['unavailable']}")
     return plan, notes, peer
@@ -107,7 +112,8 @@ def plan_runs(scene, times, ref, integrators, steps, tolerances, sweep, peers, r
 
 def study(scene: Scene, duration: float, integrators, steps, tolerances, progress=None,
           sweep=(), peers=(), repeat: int = 1) -> dict:
-    """Every requested run plus fitted orders; `progress(done, total, label)` if given."""
+    """Every requested run plus fitted orders; `progress(done, total, label)` if given.
+    Every run is measured first, then priced in `repeat` rounds over all of them in turn."""
     fixed = [n for n in integrators if not INTEGRATORS[n].adaptive]
     interval = max(list(steps) + [scene.step_size])
     times = sample_times(scene, duration, interval)
@@ -115,21 +121,26 @@ def study(scene: Scene, duration: float, integrators, steps, tolerances, progres
         scene.steps_for(interval, h)          # every method must land on the sample times
     ref, label = reference_and_label(scene, times)
     plan, notes, peer = plan_runs(scene, times, ref, integrators, steps, tolerances, sweep,
-                                  peers, repeat)
-    runs = []
-    for i, (text, run) in enumerate(plan):
+                                  peers)
+    units = len(plan) * (1 + repeat)
+    priced = []
+    for i, (text, measured) in enumerate(plan):
         if progress:
-            progress(i, len(plan), f"{scene.name}: {text}")
-        runs.append(run())
-    if progress:
-        progress(len(plan), len(plan), "done")
+            progress(i, units, f"{scene.name}: {text}")
+        priced += measured()
+    timing.price(priced, repeat, times[-1] - times[0], progress and (
+        lambda done, total: progress(len(plan) + done * len(plan) * repeat // total, units,
+                                     f"{scene.name}: pricing")))
+    runs = [p.run for p in priced if p.run.kind != "node"]
+    node = next(p.run for p in priced if p.run.kind == "node")
     orders = {n: fitted_order([r for r in runs if r.series == n]) for n in fixed}
     if "notes" in peer and any(getattr(scene, e) is not None for e in mujoco_peer.SOFT):
-        theirs = [r.max_state_error for r in runs if r.kind == "mujoco"]
+        theirs = [r.max_state_error for r in runs if r.kind.startswith("mujoco")]
         peer["floor"] = min(theirs)   # soft constraints: MuJoCo's error stops falling here
+    as_set = next(r for r in runs if r.kind == "as set")
     return {"scene": scene.name, "duration": duration, "sample_interval": interval,
-            "reference": label, "runs": [asdict(r) for r in runs], "notes": notes,
-            "peers": {"mujoco": peer} if peer else {},
+            "reference": label, "path": as_set.path, "runs": [asdict(r) for r in runs],
+            "node": asdict(node), "notes": notes, "peers": {"mujoco": peer} if peer else {},
             "orders": {n: {"fitted": o, "theory": INTEGRATORS[n].order} for n, o in orders.items()}}
 
 
@@ -190,7 +201,8 @@ def cmd_accuracy(args) -> int:
     if "mujoco" in peers and mujoco_peer.available():
         print(f"peers: {mujoco_peer.available()}; the study goes on without it", flush=True)
     results = []
-    with Progress(1.0, "arm-sim accuracy", unit="runs") as progress:
+    # a pass: a run measured, or priced in one of the --repeat rounds
+    with Progress(1.0, "arm-sim accuracy", unit="passes") as progress:
         for k, scene in enumerate(scenes):
             def tell(done, total, label, k=k):
                 progress.total = total * len(scenes)
@@ -232,7 +244,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--peers", nargs="+", default=list(PEERS), metavar="NAME",
                    help="simulators run side by side: mujoco (default when installed) or none")
     p.add_argument("--repeat", type=int, default=3,
-                   help="timed runs per point, the fastest counts (default 3)")
+                   help="rounds of timing over every run, the fastest counts (default 3)")
     p.add_argument("--json", metavar="PATH", help="write every run and the fitted orders as JSON")
     p.add_argument("--plot", metavar="PATH", help="write the work-precision diagram "
                                                   "(.png, .svg or .pdf)")

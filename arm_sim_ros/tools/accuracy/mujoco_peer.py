@@ -25,6 +25,7 @@ ours: its error against the reference stops falling with h (an error floor).
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from math import log, pi, sqrt
 
 from ...physics import model as arm_model
@@ -211,10 +212,25 @@ def reset(model, data, scene, ctrl) -> None:
     data.ctrl[:] = ctrl
 
 
+@contextmanager
+def silenced():
+    """MuJoCo's warnings off its stderr (a run it finds unstable is counted in data.warning,
+    or seen as a restart, instead)."""
+    import mujoco
+
+    told = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(told)
+
+
 class Runner:
     """One MuJoCo integrator at one step size: `run(total, every)` steps `total` times
-    through mj_step (one Python call per step, as ours steps) and keeps (q1, q2, qd1, qd2)
-    at the start and every `every`-th step."""
+    through mj_step (one Python call per step, as a user of its Python bindings steps it)
+    and keeps (q1, q2, qd1, qd2) at the start and every `every`-th step; `go` is what is
+    timed (the same)."""
 
     def __init__(self, scene, integrator: str):
         import mujoco
@@ -225,15 +241,11 @@ class Runner:
 
     def run(self, total: int, every: int) -> list[tuple]:
         """The samples; after a step MuJoCo found unstable (it then restarts from the
-        initial state and warns on stderr) every later sample is infinitely wrong."""
-        import mujoco
-
+        initial state) every later sample is infinitely wrong."""
         model, data, step = self.model, self.data, self.step
         reset(model, data, self.scene, self.ctrl)
         kept = [(*data.qpos, *data.qvel)]
-        told = mujoco.get_mju_user_warning()
-        mujoco.set_mju_user_warning(lambda message: None)   # counted in data.warning instead
-        try:
+        with silenced():
             warnings = [data.warning[w] for w in UNSTABLE]
             for n in range(1, total + 1):
                 step(model, data)
@@ -241,7 +253,42 @@ class Runner:
                     if any(w.number for w in warnings):
                         break
                     kept.append((*data.qpos, *data.qvel))
-        finally:
-            mujoco.set_mju_user_warning(told)
         return kept + [(float("inf"),) * 4] * (total // every + 1 - len(kept))
 
+    go = run
+
+
+class Rollout(Runner):
+    """The same through mujoco.rollout: every step in one call of its C loop, each state
+    kept; `go` (timed) is that call."""
+
+    def __init__(self, scene, integrator: str):
+        import mujoco
+        import numpy as np
+        from mujoco import rollout
+
+        super().__init__(scene, integrator)
+        whole = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.initial = np.zeros(mujoco.mj_stateSize(self.model, whole))
+        mujoco.mj_getState(self.model, self.data, self.initial, whole)
+        self.control = np.array(self.ctrl, dtype=float).reshape(1, 1, -1) if self.ctrl else None
+        self.rollout = rollout.rollout
+
+    def go(self, total: int, every: int = 1):
+        """States (time, qpos, qvel, ...) after each of `total` steps."""
+        with silenced():
+            return self.rollout(self.model, self.data, self.initial, self.control,
+                                nstep=total)[0][0]
+
+    def run(self, total: int, every: int) -> list[tuple]:
+        """As Runner.run; a restart shows as time that does not advance (the full physics
+        state begins with it)."""
+        states, nq, nv = self.go(total), self.model.nq, self.model.nv
+        kept, clock = [tuple(self.initial[1:1 + nq + nv])], self.initial[0]
+        for n, row in enumerate(states, start=1):
+            if not row[0] > clock:
+                break
+            clock = row[0]
+            if n % every == 0:
+                kept.append(tuple(row[1:1 + nq + nv]))
+        return kept + [(float("inf"),) * 4] * (total // every + 1 - len(kept))

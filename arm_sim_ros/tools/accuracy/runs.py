@@ -1,29 +1,42 @@
-"""The runs of the accuracy study (accuracy.py): the reference, and one method, the scene as
-set, or MuJoCo, each sampled at the same times, compared with the reference and timed the
-same way: CPU time of a Python loop of one call per step that keeps the samples, the
-fastest of several runs.
+"""The runs of the accuracy study (command.py): its reference, and each run of ours or of
+MuJoCo, sampled at the same times and compared with the reference. Each comes back with its
+price still to take (timing.py): the whole run, as a user makes it.
+
+  ours     Simulator.run over the whole duration in one call, on the path the user has
+           (compiled where numba is installed; `path` says which), with the error estimate
+           (`estimate` global) or without (off);
+  node     the scene as set through Simulator.step, one Python call per step: what the node
+           pays per tick (a line of the price list beside the runs, not a run);
+  MuJoCo   mj_step in a Python loop, as a user of its Python bindings steps it, and
+           mujoco.rollout, its C loop over every step in one call.
+
+Ours are sampled by Simulator.run up to each sample time; the timed run must end in the state
+the samples end in, bit for bit: what is priced is what was measured.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
-from math import ceil, isfinite
+from math import ceil, isfinite, nan
 
 from ...physics import model
 from ...physics.trust.accuracy import MAX_SUBSTEPS
-from ...physics.stepping.integrators import INTEGRATORS, step_for
+from ...physics.trust.unestimated import ESTIMATES  # noqa: F401  (ours run with each)
+from ...physics.stepping.integrators import INTEGRATORS
 from ...physics.scene import Scene, SceneError
 from ...physics.simulator import Simulator
 from . import mujoco_peer
 from .independent import TOLERANCE as INDEPENDENT_TOLERANCE
 from .independent import Independent, covers
+from .timing import Priced
 
 REFERENCE_TOLERANCE = 1e-13
 MODEL_EFFECTS = {"gravity", "damping", "actuator"}    # what model.forward_dynamics covers
-MIN_TIMED_CPU_S = 0.05          # repeat short runs until this much CPU time, keep the fastest
 HYBRID_STEP = 2.5e-4   # the largest step of the reference of scenes that switch modes
 # What a run is (Run.kind) and its line's name after the integrator's (Run.series).
-SERIES = {"method": "", "as set": " (scene as set)", "tolerance": " + tolerance"}
+SERIES = {"method": "", "as set": " (scene as set)", "tolerance": " + tolerance",
+          "node": " (scene as set, Simulator.step)", "mujoco": "", "mujoco rollout": " rollout"}
+OFF = ", estimate off"            # the series name of a run without
+MJ_STEP, ROLLOUT = "mj_step from Python", "mujoco.rollout"     # MuJoCo's paths
 
 
 @dataclass
@@ -34,11 +47,12 @@ class Run:
     max_state_error: float        # max over sample times and q1, q2, qd1, qd2 of |y - y_ref|
     energy_drift: float | None    # max over sample times of |E - E_ref| (J)
     balance_residual: float | None  # max over every step of |E - E(0) - W + dissipated| (J)
-    rhs_evaluations: int | None   # counted on the bare tableau step only
-    cpu_s_per_sim_s: float
-    series: str = ""              # its line: the integrator, "rk4 + tolerance", "mujoco RK4"
+    cpu_s_per_sim_s: float = nan  # the whole run's price (timing.py), per simulated second
+    series: str = ""              # its line: "rk4", "rk4, estimate off", "mujoco RK4 rollout"
     substeps: int | None = None   # sub-steps taken (Simulator.substeps_taken)
-    kind: str = "method"          # a SERIES key (the tableau's sweeps), or "mujoco"
+    kind: str = "method"          # a SERIES key
+    path: str = ""                # ours: Simulator.path; MuJoCo: MJ_STEP or ROLLOUT
+    estimate: str | None = None   # ours: an ESTIMATES value; a peer: None (not ours to choose)
 
     def __post_init__(self):
         self.series = self.series or self.integrator
@@ -144,34 +158,6 @@ def cadence(scene: Scene, times, step_size: float | None = None) -> tuple[int, i
     return every, every * (len(times) - 1)
 
 
-def per_simulated_second(seconds: float, times) -> float:
-    duration = times[-1] - times[0]
-    return seconds / duration if duration > 0 else 0.0
-
-
-class _Counted:
-    """f with a call counter (used only in the untimed pass)."""
-
-    def __init__(self, f):
-        self.f, self.calls = f, 0
-
-    def __call__(self, *y):
-        self.calls += 1
-        return self.f(*y)
-
-
-def fastest_cpu(run, repeat: int = 1) -> float:
-    """CPU seconds of the fastest call of run(): at least `repeat` calls and MIN_TIMED_CPU_S
-    in all (ours and MuJoCo's are timed by this one routine)."""
-    best, spent, calls = float("inf"), 0.0, 0
-    while calls < repeat or spent < MIN_TIMED_CPU_S:
-        start = time.process_time()
-        run()
-        elapsed = time.process_time() - start
-        best, spent, calls = min(best, elapsed), spent + elapsed, calls + 1
-    return best
-
-
 def worst(values) -> float:
     # A non-finite result is infinitely wrong, not silently skipped by max().
     return max((v if isfinite(v) else float("inf") for v in values), default=0.0)
@@ -185,80 +171,81 @@ def errors(sim: Simulator, samples, ref) -> tuple[float, float | None]:
     return state, worst(abs(sim.energy(s) - sim.energy(r)) for s, r in zip(samples, ref))
 
 
+def series_of(integrator: str, kind: str, estimate: str | None) -> str:
+    return integrator + SERIES[kind] + (OFF if estimate == "off" else "")
+
+
 def measure(scene: Scene, name: str, step_size: float, tolerance: float | None, times,
-            ref, repeat: int = 1) -> Run:
-    """One method at one step size (or tolerance) against the reference samples; the bare
-    tableau step, except where the scene switches modes (only Simulator.step does that)."""
+            ref, estimate: str = "global") -> Priced:
+    """One method at one step size (an embedded pair: at one rtol = atol), the tolerance
+    off (0), with the error estimate (`estimate` global: the estimate alone, which never
+    changes a step) or without (off): one trajectory at two prices."""
     tolerances = {} if tolerance is None else {"rtol": tolerance, "atol": tolerance}
-    if switches(scene):
-        run = measure_simulator(scene.replace(integrator=name, step_size=step_size,
-                                              tolerance=0.0, **tolerances), times, ref, repeat,
-                                "method")
-        run.tolerance = tolerance
-        return run
-    sim = Simulator(scene.replace(integrator=name, step_size=step_size))
-    step = step_for(INTEGRATORS[name], len(sim.channels), sim.dynamics.decay, **tolerances)
-    every, total = cadence(scene, times, step_size)
-    y0 = sim.state
+    at = scene.replace(integrator=name, step_size=step_size, tolerance=0.0, estimate=estimate,
+                       **tolerances)
+    return measure_simulator(at, times, ref, "method")
 
-    # Untimed pass: evaluations, the balance residual after every step, the samples.
-    counted = _Counted(sim.dynamics.function)
-    y, samples, residual = y0, [y0], 0.0
-    for n in range(1, total + 1):
-        y = step(counted, y, step_size)
-        sim.state = y
-        residual = max(residual, abs_residual(sim))
-        if n % every == 0:
-            samples.append(y)
-    sim.state = y0
 
-    f = sim.dynamics.function
+def measure_simulator(scene: Scene, times, ref, kind: str = "as set") -> Priced:
+    """The scene (its integrator, step, tolerance and estimate) through Simulator.run:
+    sampled by run up to each sample time, priced as one run over the whole duration; `kind`
+    (a SERIES key) names it."""
+    sim = Simulator(scene)
+    interval = times[1] - times[0] if len(times) > 1 else 0.0
+    samples, residual = [sim.state], 0.0
+    for _ in times[1:]:
+        residual = max(residual, sim.run(interval))
+        samples.append(sim.state if not sim.refused_steps else (float("inf"),) * len(sim.state))
+    held = sim.refused_steps or sim.diverged     # the state held is not the motion
+    final, substeps, duration = sim.state, sim.substeps_taken, times[-1] - times[0]
+    sim.reset()
+    sim.run(duration)
+    if not held and sim.state != final:
+        raise RuntimeError(f"{scene.name}: Simulator.run over {duration:g} s in one call ended "
+                           "apart from the run sampled up to each sample time")
+    return Priced(simulator_run(sim, scene, samples, ref, residual, substeps, kind, held),
+                  lambda: sim.run(duration), sim.reset)
 
-    def run():          # timed: stepping and sampling only
-        y, kept = y0, []
-        for n in range(1, total + 1):
-            y = step(f, y, step_size)
-            if n % every == 0:
-                kept.append(y)
 
-    best = fastest_cpu(run, repeat)
+def simulator_run(sim: Simulator, scene: Scene, samples, ref, residual: float, substeps,
+                  kind: str, held=False) -> Run:
+    """The Run of a simulator's samples of `scene`."""
     state_error, drift = errors(sim, samples, ref)
-    return Run(name, step_size, tolerance, state_error, drift, residual, counted.calls,
-               per_simulated_second(best, times))
+    adaptive = INTEGRATORS[scene.integrator].adaptive
+    tolerance = scene.rtol if adaptive else None if kind == "method" else scene.tolerance
+    return Run(scene.integrator, scene.step_size, tolerance, state_error, drift,
+               float("inf") if held else residual, series=series_of(
+                   scene.integrator, kind, scene.estimate),
+               substeps=substeps, kind=kind, path=sim.path, estimate=scene.estimate)
 
 
-def measure_simulator(scene: Scene, times, ref, repeat: int = 1, kind: str = "as set") -> Run:
-    """The scene as set, through Simulator.step (estimator, tolerance, sub-steps, events);
-    `kind` (a SERIES key) names the run."""
+def measure_node(scene: Scene, times, ref) -> Priced:
+    """The scene as set through Simulator.step, one Python call per step, as the node ticks;
+    priced as the steps of the whole duration."""
     sim = Simulator(scene)
     every, total = cadence(scene, times)
     samples, residual = stepped(sim, len(times) - 1, every)
-    substeps = sim.substeps_taken
+    run = simulator_run(sim, scene, samples, ref, residual, sim.substeps_taken, "node",
+                        sim.refused_steps or sim.diverged)
 
-    def run():
-        sim.reset()
-        step, kept = sim.step, []
-        for n in range(1, total + 1):
+    def go():
+        step = sim.step
+        for _ in range(total):
             step()
-            if n % every == 0:
-                kept.append(sim.state)
-
-    best = fastest_cpu(run, repeat)
-    state_error, drift = errors(sim, samples, ref)
-    adaptive = INTEGRATORS[scene.integrator].adaptive
-    return Run(scene.integrator, scene.step_size, scene.rtol if adaptive else scene.tolerance,
-               state_error, drift, residual, None, per_simulated_second(best, times),
-               scene.integrator + SERIES[kind], substeps, kind)
+    return Priced(run, go, sim.reset)
 
 
-def measure_mujoco(scene: Scene, integrator: str, step_size: float, times, ref,
-                   repeat: int = 1) -> Run:
-    """MuJoCo's `integrator` at `step_size`, sampled and timed as ours are."""
-    runner = mujoco_peer.Runner(scene.replace(step_size=step_size), integrator)
+def measure_mujoco(scene: Scene, integrator: str, step_size: float, times,
+                   ref) -> list[Priced]:
+    """MuJoCo's `integrator` at `step_size`, sampled as ours are; priced twice: mj_step in
+    a Python loop and mujoco.rollout."""
+    at = scene.replace(step_size=step_size)
     every, total = cadence(scene, times, step_size)
-    samples = runner.run(total, every)
-    best = fastest_cpu(lambda: runner.run(total, every), repeat)
-    state_error, drift = errors(Simulator(scene), samples, ref)
-    name = f"mujoco {integrator}"
-    return Run(name, step_size, None, state_error, drift, None, None,
-               per_simulated_second(best, times), name, kind="mujoco")
+    ours, name, priced = Simulator(scene), f"mujoco {integrator}", []
+    for runner, kind, path in ((mujoco_peer.Runner(at, integrator), "mujoco", MJ_STEP),
+                               (mujoco_peer.Rollout(at, integrator), "mujoco rollout", ROLLOUT)):
+        state_error, drift = errors(ours, runner.run(total, every), ref)
+        run = Run(name, step_size, None, state_error, drift, None, series=name + SERIES[kind],
+                  kind=kind, path=path)
+        priced.append(Priced(run, lambda runner=runner: runner.go(total, every)))
+    return priced

@@ -158,6 +158,7 @@ def summarise(problem: Problem, results, names) -> dict:
     stats = uncertainty(jac, residuals, problem.n_parameters)
     fitted = with_values(problem.base, problem.free, problem.values(xp))
     values = np.array([p.value(fitted) for p in problem.free])   # Fs below Fc acts as Fc
+    values[problem.sensing] = problem.values(xp)[problem.sensing]   # delays: not rounded
     se = stats["se"] * problem.scale
     runs = problem.simulate(xp, states, problem.training)
     chi2 = 2 * r["cost"] / r["residuals"]

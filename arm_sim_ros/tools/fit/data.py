@@ -9,7 +9,8 @@ with `torque_topic`, the latest command on `joint_torque_commands` (Float64Multi
 bag time, zero before the first.
 
 From a CSV: the columns `arm-sim run --csv` writes (t, q1, q2, qd1, qd2, tau1, tau2; others
-ignored). Every problem (no such topic, names that do not match, too few, non-finite or
+ignored; a run with sensors: q1_measured ... qd2_measured in place of the truth, as
+/joint_states carries them). Every problem (no such topic, names that do not match, too few, non-finite or
 unevenly spaced samples) is one line: FitError.
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ...usage import UsageError
 MIN_SAMPLES = 50          # fewer cannot hold a segment, a validation segment and the noise
 JITTER = 0.25             # a sample interval may differ from the median by this fraction
 CSV_NEEDED = ("t", "q1", "q2", "qd1", "qd2", "tau1", "tau2")
+CSV_MEASURED = ("q1_measured", "q2_measured", "qd1_measured", "qd2_measured")   # sensors
 TORQUE_TOPICS = ("/" + COMMAND_TOPIC, "/" + JOINT_COMMANDS_TOPIC)
 
 
@@ -106,6 +108,8 @@ def _read_csv(path: Path):
         raise FitError(f"{path}: no column {', '.join(missing)}; a fit reads "
                        f"{', '.join(CSV_NEEDED)} (as `arm-sim run --csv` writes them)")
     index = [header.index(c) for c in CSV_NEEDED]
+    if all(c in header for c in CSV_MEASURED):      # made with sensors: what they read
+        index[1:5] = [header.index(c) for c in CSV_MEASURED]
     try:
         data = np.array([[float(row[i]) for i in index] for row in rows[1:]], dtype=float)
     except (ValueError, IndexError):

@@ -9,7 +9,8 @@ uncorrelated), Schroeder phases for a low crest factor, scaled to a peak per joi
 The run replays it through our Simulator (the scene's drive chain and physics, torque
 held per sample) and writes a rosbag2 as the node would publish it: /joint_states (effort
 = the applied torque) and /joint_torque_commands (the multi-sine), optionally with
-Gaussian noise on the measured positions and velocities. For a real arm, --torques writes
+Gaussian noise on the measured positions and velocities; a scene with `sensors` records
+their readings, as the node publishes them. For a real arm, --torques writes
 the same schedule as a CSV (t, tau1, tau2) for its controller to play, and the recording
 of that run is what to fit.
 """
@@ -64,8 +65,9 @@ def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), s
             sim.set_command(t1, t2)
             ns = round(t[k] * 1e9)
             s = sim.sample()
-            q = np.array(s.q) + rng.normal(0.0, noise[0], 2) if noise[0] else s.q
-            qd = np.array(s.qd) + rng.normal(0.0, noise[1], 2) if noise[1] else s.qd
+            read = s.measured or (*s.q, *s.qd)      # with sensors: as the node publishes
+            q = np.array(read[:2]) + rng.normal(0.0, noise[0], 2) if noise[0] else read[:2]
+            qd = np.array(read[2:]) + rng.normal(0.0, noise[1], 2) if noise[1] else read[2:]
             bag.write("/joint_states", ns, joint_state(ns, q, qd, sim.joint_torque()))
             bag.write("/joint_torque_commands", ns, torque_command((t1, t2)))
             for _ in range(substeps):

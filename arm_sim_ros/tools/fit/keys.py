@@ -5,27 +5,32 @@ joints). A per-joint key (`friction.coulomb`, `motors.rotor_inertia`, `springs.s
 `link_masses`, a per-joint `damping`) frees both joints' values, `key[i]` only joint i's.
 Everything else keeps the base scene's value. An effect the base scene lacks is added with
 its free key at a typical value (its other keys must have defaults: `motors.gear_ratio`
-has none, so motors need the base scene's).
+has none, so motors need the base scene's). Of the sensors, `sensors.delay` and
+`sensors.position_offset` (and `command_delay`) are fitted, continuous (observe.py); a
+scene written with them rounds the delays to whole steps, as a scene must have them.
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
 
-from ...physics.effects import MAPPING_EFFECTS
-from ...physics.scene import FIELD_KINDS, Scene, SceneError
+from ...physics.scene import FIELD_KINDS, MAPPINGS, Scene, SceneError
 from .data import FitError
 
 # Top-level keys a recording can identify, with units and check.
 FIELDS = {"gravity": ("m/s^2", "non-negative"), "damping": ("N m s/rad", "non-negative"),
           "link_lengths": ("m", "positive"), "link_masses": ("kg", "positive"),
-          "com_distances": ("m", "any"), "com_inertias": ("kg m^2", "non-negative")}
+          "com_distances": ("m", "any"), "com_inertias": ("kg m^2", "non-negative"),
+          "command_delay": ("s", "non-negative")}
 # Effects whose keys would not change a replay of the applied torque.
 NOT_FITTED = ("controller_model",)
+# The sensors' keys a recording identifies: the others are noise, counts or rates.
+FITTED_SENSORS = ("delay", "position_offset")
 # A typical magnitude per key: where a start at 0 is moved to, and the scale of the search.
 TYPICAL = {"damping": 0.1, "friction.coulomb": 0.1, "friction.static": 0.1,
            "friction.stribeck_velocity": 0.05, "motors.rotor_inertia": 1e-5,
-           "motors.gear_ratio": 10.0, "payload.mass": 0.1, "springs.stiffness": 1.0}
+           "motors.gear_ratio": 10.0, "payload.mass": 0.1, "springs.stiffness": 1.0,
+           "sensors.delay": 1e-3, "sensors.position_offset": 1e-2, "command_delay": 1e-3}
 KEY = re.compile(r"^([a-z_]+)(?:\.([a-z_]+))?(?:\[([01])\])?$")
 
 
@@ -88,8 +93,9 @@ def _parameters(key: str, scene: Scene) -> list[FreeParameter]:
         per_joint = FIELD_KINDS[field] == "pair" or (field == "damping"
                                                      and isinstance(scene.damping, tuple))
     else:
-        effect = MAPPING_EFFECTS.get(field)
-        known = {p.name: p for p in effect.parameters} if effect else {}
+        effect = MAPPINGS.get(field)
+        known = {p.name: p for p in effect.parameters if field != "sensors"
+                 or p.name in FITTED_SENSORS} if effect else {}
         if field in NOT_FITTED or name not in known:
             raise FitError(f"--free {key}: not a key a fit can free"
                            + (f"; {field} keys: {', '.join(known)}" if known and field not in
@@ -124,6 +130,9 @@ def with_values(scene: Scene, free, values) -> Scene:
         pair[p.index] = float(v)
         overrides[key] = pair
     overrides = _breakaway(scene, overrides)
+    for key in ("sensors.delay", "command_delay"):     # a scene's delays are whole steps
+        if key in overrides:
+            overrides[key] = round(overrides[key] / scene.step_size) * scene.step_size
     return scene.replace(**{k: tuple(v) if isinstance(v, list) else v
                             for k, v in overrides.items()})
 

@@ -10,9 +10,15 @@ it would. The last VALIDATION_FRACTION of each recording is held out.
 The simulator replays the recorded torque held over each sample interval (as the node
 holds a command), with the scene's own exact stick-slip friction and limits, at a fixed
 step (tolerance 0: no adaptive sub-steps, so the trajectory is a smooth function of the
-parameters between switches and finite differences are reproducible). Residuals are
+parameters between switches and finite differences are reproducible), and with no error
+estimate (estimate off: no shadow, no checks, which a rollout would only pay for). Residuals are
 (simulated - measured) / σ per channel, σ each channel's noise estimated from the data
 (noise_level), so the cost is a χ² and ~1 per residual at the noise level.
+
+A recording made with sensors is compared through their deterministic parts (observe.py):
+the simulated truth delayed, offset and differenced as the readings were, and the commands
+shifted by command_delay; sensors.delay, sensors.position_offset and command_delay are then
+free keys like the others, continuous (the replay itself has no sensors).
 
 Scaling: parameter i is searched as x = value / scale_i (scale: its start value), a
 segment's start state as its offset from the measured one in units of σ. The Jacobian is
@@ -27,7 +33,9 @@ import numpy as np
 
 from ...physics.scene import SceneError
 from ...physics.simulator import Simulator
+from .data import FitError
 from .keys import start_values, with_values
+from .observe import SENSING_KEYS, Observation
 
 SEGMENT_SECONDS = 1.0
 VALIDATION_FRACTION = 0.2
@@ -50,7 +58,8 @@ def replay_scene(base, mode: str, dt: float):
     """The scene that replays a recording's torque: the `effort` is what the joints received
     (no policy, limits or windings again); commands go through the scene's drive chain."""
     substeps = max(1, int(np.ceil(dt / base.step_size - 1e-9)))
-    changes = {"step_size": dt / substeps, "tolerance": 0.0,
+    changes = {"step_size": dt / substeps, "tolerance": 0.0, "estimate": "off",
+               "sensors": None, "command_delay": 0.0,     # seen through them: observe.py
                "initial_positions": (0.0, 0.0), "initial_velocities": (0.0, 0.0)}
     if mode == "effort":
         changes |= {"policy": "command", "effort_limits": None, "controller_model": None}
@@ -83,6 +92,12 @@ class Problem:
                  segment_seconds: float = SEGMENT_SECONDS,
                  validation: float = VALIDATION_FRACTION):
         self.base, self.free, self.recordings, self.mode = base, list(free), list(recordings), mode
+        self.sensing = [i for i, p in enumerate(self.free) if p.key.partition("[")[0]
+                        in SENSING_KEYS]           # observed through the sensors (observe.py)
+        self.physical = [i for i in range(len(self.free)) if i not in self.sensing]
+        if mode == "effort" and any(self.free[i].field == "command_delay" for i in self.sensing):
+            raise FitError("--free command_delay needs the commands (--torque-topic): the "
+                           "JointState effort is the torque as it acts, already delayed")
         self.replays = [replay_scene(base, mode, r.dt) for r in self.recordings]
         self.sigma = [noise_level(r) for r in self.recordings]
         self.scale = np.abs(np.array(start_values(self.free, base), dtype=float))
@@ -108,25 +123,38 @@ class Problem:
 
     def scenes(self, xp):
         """The replay scene of each recording at scaled parameters xp (None: refused)."""
+        values, free = self.values(xp), self.free
         try:
-            return [(with_values(scene, self.free, self.values(xp)), n)
-                    for scene, n in self.replays]
+            return [(with_values(scene, [free[i] for i in self.physical], values[self.physical]),
+                     n) for scene, n in self.replays]
         except SceneError:
             return None
 
+    def observation(self, xp) -> Observation:
+        """The sensors' deterministic parts at scaled parameters xp (observe.py)."""
+        return Observation.of(self.base).with_values([self.free[i] for i in self.sensing],
+                                                     self.values(xp)[self.sensing])
+
     def simulate(self, xp, states, segments) -> list[np.ndarray] | None:
         """(n, 4) q1, q2, qd1, qd2 of each segment from its scaled start state."""
-        scenes = self.scenes(xp)
+        scenes, seen = self.scenes(xp), self.observation(xp)
         if scenes is None:
             return None
-        sims, out = {}, []
+        sims, out, offset = {}, [], np.array([*seen.offset, 0.0, 0.0])
+        torques = [seen.torques(r.tau, r.dt) for r in self.recordings]
         for segment, s in zip(segments, np.reshape(states, (-1, 4))):
             k = segment.recording
             scene, substeps = scenes[k]
-            start = self.measured(segment)[0] + self.sigma[k] * s
+            start = self.measured(segment)[0] - offset + self.sigma[k] * s
             sims[k] = sim = restarted(sims.get(k), scene, start)
-            out.append(rollout(sim, substeps, self.recordings[k].tau[segment.start:segment.stop]))
+            run = rollout(sim, substeps, torques[k][segment.start:segment.stop])
+            out.append(seen.readings(run, self.recordings[k].dt) if self.observed else run)
         return out
+
+    @property
+    def observed(self) -> bool:
+        """Whether the recording is compared through sensors (the base's, or free keys)."""
+        return bool(self.sensing) or self.base.sensors is not None
 
     def residuals(self, xp, states, segments) -> list[np.ndarray]:
         """Per segment, the flattened (simulated - measured) / σ."""

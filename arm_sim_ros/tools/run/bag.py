@@ -1,7 +1,8 @@
 """`arm-sim run ... --bag DIR`: the topics the node would have published, from an offline run.
 
 JointState every publish period (header stamps: simulated time from 0, as the node's with
-clock_origin zero), the applied command when the policy takes commands, and the node's
+clock_origin zero; with sensors the readings, and the truth on /arm_sim/true_joint_states
+at the same stamps), the applied command when the policy takes commands, and the node's
 diagnostics every simulated second. The bag's own clock (each message's receive time, what
 `ros2 bag info` shows) is the wall clock when the run started plus simulated time, as
 `ros2 bag record` of the node would have written it, so the bag does not start in 1970; written through recording.bag's BagWriter, so the bag opens even after a kill -9
@@ -15,9 +16,10 @@ from math import ceil, isfinite
 from pathlib import Path
 from time import perf_counter, time_ns
 
-from ...interface import ERROR, NODE_TOPICS, OK, WARN
+from ...interface import ERROR, NODE_TOPICS, OK, SENSOR_TOPICS, TRUE_JOINT_STATES, WARN
 from ...node.core import diagnostic_values
-from ...node.params.parameters import ParameterRefused, steps_per_tick
+from ...node.params.parameters import steps_per_tick
+from ...node.params.values import ParameterRefused
 from ...recording.bags.bag import (BagError, BagWriter, diagnostic_array, joint_state,
                                    torque_command)
 from ..arguments import scene_from_args
@@ -61,7 +63,8 @@ class RunBag:
         self.writer = BagWriter(self.path, start_ns=self.bag_origin_ns)
         self.end_steps = sim.steps + sim.scene.steps_for(sim.scene.duration, sim.step_size)
         self.commands = sim.scene.policy in APPLIED_COMMAND_POLICIES
-        for topic, msgtype in NODE_TOPICS.items():
+        self.sensors = sim.scene.sensors is not None
+        for topic, msgtype in (NODE_TOPICS | (SENSOR_TOPICS if self.sensors else {})).items():
             if self.commands or topic != "/joint_torque_commands":
                 self.writer.add_topic(topic, msgtype)
         self.diagnostics_steps = ceil(DIAGNOSTICS_PERIOD / sim.step_size - 1e-9)
@@ -90,7 +93,12 @@ class RunBag:
         if not sim.holding:  # the largest |residual| at a tick, as the node keeps it
             self.max_abs_residual = max(self.max_abs_residual, abs(s.residual))
         at = self.bag_origin_ns + t
-        self.writer.write("/joint_states", at, joint_state(t, s.q, s.qd, s.tau))
+        if self.sensors:      # the readings as the node publishes them, the truth beside
+            self.writer.write("/joint_states", at, joint_state(t, s.measured[:2],
+                                                               s.measured[2:], s.tau))
+            self.writer.write(TRUE_JOINT_STATES, at, joint_state(t, s.q, s.qd, s.tau))
+        else:
+            self.writer.write("/joint_states", at, joint_state(t, s.q, s.qd, s.tau))
         if self.commands:
             self.writer.write("/joint_torque_commands", at, torque_command(applied_command(sim)))
 
@@ -118,7 +126,7 @@ class RunBag:
 def applied_command(sim):
     """The command part of the torque: the constant torque, or the held command."""
     scene = sim.scene
-    return scene.constant_torque if scene.policy == "constant" else tuple(sim.dynamics.command)
+    return scene.constant_torque if scene.policy == "constant" else tuple(sim.dynamics.given)
 
 
 def run_recorder(args):

@@ -9,7 +9,7 @@ sound state, held from then on) is kept, as the node publishes it.
 """
 from __future__ import annotations
 
-from ...physics.simulator import sample
+from ...physics.simulator import recorded_row, sample
 from ...recording.readouts import error_books
 
 
@@ -20,6 +20,8 @@ class StepView:
     def __init__(self, sim):
         self._sim = sim
         self.state, self.steps, self.holding = sim.state, sim.steps, sim.holding
+        self.readings = sim.readings      # with sensors: as read after the step
+        self._torque = sim.joint_torque()  # under a control loop it changes every step
         self.fault, self.refused_steps = sim.fault, sim.refused_steps
         _, self.error_estimate, self.accumulated_error, self.substeps_taken = error_books(sim)
 
@@ -32,6 +34,10 @@ class StepView:
 
     def sample(self):
         return sample(self)
+
+    def joint_torque(self, state=None):
+        return self._torque if state is None or state is self.state else \
+            self._sim.joint_torque(state)
 
     def residual(self, state=None) -> float:
         return self._sim.residual(self.state if state is None else state)
@@ -52,7 +58,7 @@ class ConfirmedSteps:
 
     def on_step(self, sim) -> None:
         if self.batched:                     # a recorder with step_batch takes them
-            self.states.append(sim.state)
+            self.states.append(recorded_row(sim))
             self.steps.append(sim.steps)
             if self.every and sim.steps % self.every == 0:
                 self.books.extend(error_books(sim))
@@ -94,7 +100,7 @@ class ConfirmedSteps:
             if self.waiting and self.waiting[-1].steps == sim.steps:
                 self.waiting[-1] = StepView(sim)
             if self.steps and self.steps[-1] == sim.steps:
-                self.states[-1] = sim.state
+                self.states[-1] = recorded_row(sim)
         self.release()
         runs, start = [], 0
         for i in range(1, len(self.steps) + 1):

@@ -24,13 +24,15 @@ CHUNK_SECONDS of messages; a full disk or file-size limit closes it with what fi
 from __future__ import annotations
 
 import time
-from ...interface import KNOWN_TOPICS, wrong_type
+
+from ...interface import KNOWN_TOPICS, SENSOR_TOPICS, wrong_type
 from ...usage import UsageError
 from ..signals import StopOnSignals
 
 DEFAULT_TOPICS = {"/joint_states": "sensor_msgs/msg/JointState",
                   "/joint_torque_commands": "std_msgs/msg/Float64MultiArray",
-                  "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+                  "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+                  **SENSOR_TOPICS}     # the truth beside readings: in the bag once it comes
 EXTRA_TYPES = ("sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray")
 POLL_SECONDS = 0.1  # how soon a stop request is noticed
 TAKE_BATCH = 256
