@@ -67,14 +67,11 @@ class ArmSimCore(CommandInput):
                                  self.late_ticks)
 
     def _on_sim_event(self, event) -> None:
-        """What the simulator does later reaches the log as it happens, at the event's level
-        (a fault: _advance); warnings rate-limited by kind."""
+        """Said at the event's level as it happens (a fault: _advance), warnings rate-limited."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind == "fault":
-            return
         if event.level == "warning":
             self.warnings.warning(event.kind, text)
-        else:
+        elif event.kind != "fault":
             (self.log.info if event.level == "info" else self.log.error)(text)
 
     def set_parameters(self, changes: dict) -> list:

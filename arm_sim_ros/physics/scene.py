@@ -282,10 +282,9 @@ def _effect_value(name, parameter, value):
 
 def unknown_key(key: str) -> str:
     """Why `key` is no scene key, with the closest one (an effect's keys as effect.key)."""
-    effect_keys = [f"{effect}.{p.name}" for effect, cls in MAPPING_EFFECTS.items()
-                   for p in cls.parameters]
-    hint = did_you_mean(key, FIELD_KINDS) or did_you_mean(key, effect_keys) or next(
-        (f"did you mean {k!r}? " for k in effect_keys if k.endswith(f".{key}")), "")
+    keys = [f"{effect}.{p.name}" for effect, cls in MAPPINGS.items() for p in cls.parameters]
+    hint = did_you_mean(key, FIELD_KINDS) or did_you_mean(key, keys) or next(
+        (f"did you mean {k!r}? " for k in keys if k.endswith(f".{key}")), "")
     return f"unknown scene key {key!r}; {hint}known keys: {', '.join(FIELD_KINDS)}"
 
 
@@ -295,9 +294,8 @@ def parse_value(key: str, text: str):
     if dot and effect in MAPPINGS:
         known = {p.name: p for p in MAPPINGS[effect].parameters}
         if name not in known:
-            raise SceneError(f"{key} is not a key of {effect}; "
-                             f"{did_you_mean(key, [f'{effect}.{k}' for k in known])}its keys: "
-                             f"{', '.join(known)}")
+            hint = did_you_mean(key, [f"{effect}.{k}" for k in known])
+            raise SceneError(f"{key} is not a key of {effect}; {hint}its keys: {', '.join(known)}")
         kind = known[name].kind
     elif key in FIELD_KINDS:
         kind = FIELD_KINDS[key]
@@ -362,8 +360,7 @@ def scene_dirs() -> list[Path]:
 
 
 def preset_names() -> list[str]:
-    dirs = scene_dirs()
-    return sorted({p.stem for d in dirs[:1] for p in d.glob("*.yaml")})
+    return sorted({p.stem for d in scene_dirs()[:1] for p in d.glob("*.yaml")})
 
 
 def load_scene(name: str = "release") -> Scene:
@@ -395,8 +392,7 @@ def scene_from_file(path: Path, name: str) -> Scene:
         data = yaml_files.load(path, "scene file")
     except yaml_files.YamlFileError as error:
         raise SceneError(str(error)) from None
-    data = {} if data is None else data
-    if not isinstance(data, dict):
+    if not isinstance(data := {} if data is None else data, dict):
         raise SceneError(f"scene file {path} must hold a mapping of keys to values")
     try:
         return Scene(name=name).replace(**data)

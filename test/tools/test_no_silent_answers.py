@@ -14,6 +14,7 @@ from arm_sim_ros.interface import KNOWN_TOPICS, wrong_type
 from arm_sim_ros.node import main as node_main
 from arm_sim_ros.node.params.parameters import ParameterRefused, resolve_parameters
 from arm_sim_ros.tools import cli
+from arm_sim_ros.tools.wire.record import DEFAULT_TOPICS
 
 wire = pytest.importorskip("arm_sim_ros.node.wire.messages")
 CONFIG = wire.loopback_config(f"arm_sim_test_no_silent_answers_{os.getpid()}")
@@ -107,7 +108,7 @@ def test_a_recording_that_received_nothing_says_so_exits_1_and_leaves_no_bag(tmp
     assert process.returncode == 1, err
     assert out == ""
     assert err.splitlines()[-1] == (
-        "record: no message arrived on /joint_states, /joint_torque_commands, /diagnostics; no "
+        f"record: no message arrived on {', '.join(DEFAULT_TOPICS)}; no "   # main's truth topic too
         "bag written. Is the node running (and publishing while this records), with the same "
         "ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE?")
     assert not bag.exists()

@@ -56,9 +56,8 @@ JOINT_SERIES = {  # path: (title, series names)
     "joints/current": ("winding current (A)", ("i1 shoulder", "i2 elbow")),
 }
 JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
-# The joints' small panes carry no legend: it covered their curves. Every series of a joint
-# is drawn in its link's colour (the arm's view says which), a commanded torque darker;
-# hovering a curve names it.
+# Small panes carry no legend (it covered their curves): a joint's series are drawn in its
+# link's colour (the arm's view says which), a command darker; hovering a curve names it.
 NO_LEGEND = rrb.PlotLegend(visible=False)
 COMMANDED_SERIES = ("τ1 commanded", "τ2 commanded")
 COMMANDED_COLORS = ((40, 130, 255), (255, 110, 40))  # beside the applied torque's cyan, amber
@@ -224,10 +223,9 @@ def trust_view(snap) -> rrb.Vertical:
     each step's local error estimate and their sum (rad, rad/s; the tolerance in the title:
     it is a scaled error per second, in no unit the estimate has), what holding them cost
     (sub-steps per step) and what the simulator did (events). Each pane scales to its own
-    series: J and rad apart, a step's error apart from the sum of thousands. The legends
-    here are hidden: each pane holds one series, which its title names with its unit (the
-    series' names, shown on hover, have the unit too; the entities' own names leave it to
-    their `unit`, which `arm-sim inspect` appends)."""
+    series: J and rad apart, a step's error apart from the sum of thousands. No legends: a
+    pane holds one series, which its title names with its unit (as its name does, on hover;
+    the entities' own names leave it to their `unit`, which `arm-sim inspect` appends)."""
     legend = NO_LEGEND
 
     def pane(title, named):
