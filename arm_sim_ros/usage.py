@@ -6,15 +6,21 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import sys
 import unicodedata
 
 # Exit codes of `arm-sim` and `arm_sim_node`, in one place (docs/reference/exit_codes.md).
-DONE, FAULT, REFUSED, STOPPED, BROKEN_PIPE = 0, 1, 2, 130, 141
+DONE, FAULT, REFUSED, UNEXPLAINED, STOPPED, BROKEN_PIPE = 0, 1, 2, 3, 130, 141
 EXIT_CODES = {
-    DONE: "done (the node: also stopped by SIGINT or SIGTERM)",
+    DONE: "done (the node: also stopped by SIGINT or SIGTERM; `arm-sim fit`: the fitted "
+          "model explains the recording)",
     FAULT: "the work failed: `arm-sim run` faulted (a step was refused: `fault` and "
-           "`refused_steps` in `--json`), `arm-sim fit` did not converge, `arm-sim send-torque` "
-           "found no subscriber, `arm-sim record` received no message (no bag is left)",
+           "`refused_steps` in `--json`), `arm-sim fit` stopped at a bound before it converged "
+           "(which, and the best point), `arm-sim excite` faulted (no bag) or recorded a joint "
+           "that never moved, `arm-sim send-torque` found no subscriber, `arm-sim record` "
+           "received no message (no bag is left)",
+    UNEXPLAINED: "`arm-sim fit` converged, but the fitted model does not explain the "
+                 "recording (its verdict: more than 2 x the noise); the outputs are written",
     REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "
              "or half-written",
     STOPPED: "`arm-sim` stopped by SIGINT, SIGTERM or SIGHUP; every output is closed at the "
@@ -32,6 +38,17 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(message)
+
+
+def exit_as_main(code: int):
+    """sys.exit(code) for `python -m ...`: under -m, CPython (3.11 to 3.13, Modules/main.c)
+    ends the process by SIGINT (-2) instead of `code` when a KeyboardInterrupt once passed
+    through an exec of a string, however it was caught and handled after. numba and
+    dataclasses exec strings, so a SIGTERM met inside a first tick's compile turned a clean
+    stop (exit 0) into -2, one stop in six. A fresh exec clears that note (pythonrun.c
+    run_eval_code_obj). The console scripts run as files and never met it."""
+    exec("pass")
+    sys.exit(code)
 
 
 def one_line(message) -> str:

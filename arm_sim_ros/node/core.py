@@ -133,10 +133,10 @@ class ArmSimCore(CommandInput):
         last = self._last_tick_wall
         return self._tick(now) if wait and (last is None or now - last >= wait) else None
 
-    def step_ticks(self, count: int) -> list:
-        """`count` ticks now, whatever the schedule (StepSimulation); their JointStates."""
+    def step_tick(self) -> JointStateData:
+        """A tick now, whatever the schedule (StepSimulation); its JointState."""
         self._last_tick_wall = None       # asked for: not late
-        return [self._tick() for _ in range(count)]
+        return self._tick()
 
     def take_lockstep_states(self) -> list:
         states, self.lockstep_states = self.lockstep_states, []

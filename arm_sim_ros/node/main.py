@@ -19,7 +19,7 @@ import time
 from . import transports
 from ..interface import NODE_NAME
 from ..physics.scene import MAX_DURATION
-from ..usage import DONE, REFUSED, ArgumentParser, UsageError, one_line
+from ..usage import DONE, REFUSED, ArgumentParser, UsageError, exit_as_main, one_line
 from .params.parameters import PARAMETERS, when_changed
 from .params.values import ParameterRefused
 from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
@@ -170,4 +170,4 @@ def _print_status(line: str) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_as_main(main())

@@ -78,9 +78,9 @@ class Scene:
         for f in fields(self):
             object.__setattr__(self, f.name, coerce_value(f.name, FIELD_KINDS[f.name],
                                                           getattr(self, f.name)))
-        if max(abs(v) for v in self.initial_positions) > MAX_ANGLE:
-            raise SceneError(f"initial_positions = {list(self.initial_positions)} is beyond "
-                             f"{MAX_ANGLE:g} rad in magnitude")
+        for key, at in (("initial_positions", self.initial_positions), ("setpoint", self.setpoint)):
+            if not max(abs(v) for v in at) <= MAX_ANGLE:     # a set-point: as commands' are
+                raise SceneError(f"{key} = {list(at)} is beyond {MAX_ANGLE:g} rad in magnitude")
         if self.gravity < 0:
             raise SceneError(f"gravity = {self.gravity} is a magnitude (along -y); it must be >= 0")
         if min(_pair(self.damping)) < 0:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from math import isfinite, nan
+from math import inf, isfinite, nan
 
 from .trust import accuracy, guard
 from .compiled import runs as compiled
@@ -297,12 +297,14 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     """Simulator.set_command, servo `setpoints` {(field, joint): value}. A new command moves
     the local error at once: the next step is checked (accuracy.py), not the one the
     schedule had come to."""
-    before = commanded(sim)
+    before, torque = commanded(sim), tuple(sim.dynamics.given)
     sim.dynamics.given[0] = tau1      # under a control loop: its input (sensing/loop.py)
     sim.dynamics.given[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
     if commanded(sim) != before:
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
+    if tuple(sim.dynamics.given) != torque and sim.accuracy.shadow is not None:
+        sim.accuracy.shadow.answered()        # a controller's answer (shadow.py)
 
 
 def commanded(sim: Simulator) -> tuple:
@@ -337,7 +339,9 @@ def books_for(sim: Simulator, scene: Scene, step):
         sim.dynamics, sim._tableau, step, sim.substeps, lambda kind, message: None, lambda: 0.0)
     return accuracy.plan(sim._tableau, step, sim.substeps, scene.tolerance, 4, sim._emit,
                          lambda: sim.steps, sim.switching, getattr(sim, "accuracy", None),
-                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate)
+                         int(scene.max_substeps), 4 + len(sim.extra), twin, scene.estimate,
+                         sim.stability_ratio / (sim.stability_limit or inf),
+                         stability.stiff_names(sim.dynamics.active, sim.arm) or "damping")
 
 
 def energies(sim: Simulator, state) -> tuple[float, float]:

@@ -28,6 +28,10 @@ def scene_from_args(args, note=None) -> Scene:
     if getattr(args, "estimate", None) is not None:   # off alone: tolerance 0 (Scene.replace)
         overrides["estimate"] = args.estimate
     scene = scene.replace(**overrides)
+    given = [text.partition("=")[0].strip() for text in getattr(args, "set", None) or []]
+    twice = next((key for k, key in enumerate(given) if key and key in given[:k]), None)
+    if twice:                   # the last would win unseen
+        raise SceneError(f"--set {twice} is given twice; give it once")
     scene = scene.with_text_overrides(getattr(args, "set", None) or [])
     warning = angle_warning(scene)
     if warning:

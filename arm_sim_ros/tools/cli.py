@@ -19,7 +19,7 @@ from ..recording.csv_file import CsvRecorder
 from ..recording.readouts import error_books, held_by
 from ..outputs import check_output, claim_output, clear_output, strict_json
 from ..usage import (BROKEN_PIPE, DONE, FAULT, REFUSED, STOPPED, ArgumentParser, UsageError,
-                     one_line)
+                     exit_as_main, one_line)
 from .arguments import add_scene_arguments, scene_from_args
 from .run.confirmed import ConfirmedSteps
 from .progress import Progress
@@ -246,4 +246,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_as_main(main())

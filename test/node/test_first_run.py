@@ -40,9 +40,9 @@ def test_its_chaos_is_said_once_at_info_in_plain_words():
     assert said(log, "warning") == []
     unpredictable = [m for m in said(log, "info") if "unpredictable" in m]
     assert unpredictable == [
-        "past t = 11.74 s this motion is unpredictable: it is chaotic, and errors far below the "
+        "past t = 11.73 s this motion is unpredictable: it is chaotic, and errors far below the "
         "tolerance at each step have grown past 1 rad; the run goes on, but no longer follows "
-        "the true motion (the error estimate stops at that bound) (at t = 11.730000 s)"]
+        "the true motion (the error estimate stops at that bound) (at t = 11.720000 s)"]
 
 
 @pytest.mark.parametrize("overrides, kinds", [

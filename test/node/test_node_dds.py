@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import time
+import types
 
 import pytest
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
@@ -515,6 +516,27 @@ def test_send_torque_command_line(monkeypatch, capsys):
     assert "no subscriber on joint_torque_commands" in capsys.readouterr().err
     assert cli_main(["send-torque", "1", "0", "--rate", "0"]) == 2
     assert "--rate 0.0 must be a positive number" in capsys.readouterr().err
+    # refused before joining the network: no wait for discovery (issue 39)
+    for torques in (["nan", "0"], ["1", "inf"]):
+        assert cli_main(["send-torque", *torques, "--wait", "30"]) == 2
+        assert "is not a torque (finite N m)" in capsys.readouterr().err
+
+
+def test_send_torque_repeats_at_its_rate_acknowledged_once():
+    """Each message waited for its acknowledgements: --rate 100 --duration 3 ran 32 s, ~10 Hz
+    whatever the rate. Written on schedule, only the last is waited for."""
+    from arm_sim_ros.tools.wire.send_torque import TorquePublisher
+
+    node, _ = start(32, gravity=0.0)
+    publisher = TorquePublisher(domain_id=32, config=CONFIG)
+    assert publisher.wait_for_subscriber(TIMEOUT)
+    waits, written, writer = [], [], publisher.writer
+    publisher.writer = types.SimpleNamespace(
+        write=lambda sample: written.append(sample) or writer.write(sample),
+        wait_for_acks=lambda timeout: waits.append(timeout) or writer.wait_for_acks(timeout))
+    publisher.repeat([0.5, -0.5], 200.0, 0.25)
+    assert len(written) == 50 and len(waits) == 1           # 0.25 s at 200 Hz
+    assert node.take_commands(timeout=TIMEOUT) >= 1 and node.tick().effort == [0.5, -0.5]
 
 
 def test_the_tick_schedule_makes_up_a_short_lag_and_restarts_after_a_long_one():

@@ -204,3 +204,34 @@ def test_a_servo_rate_set_live_samples_the_commands_and_a_bad_one_is_refused():
     with pytest.raises(ParameterRefused, match="servo.rate = 1e.06 Hz samples 1000 times"):
         core.set_parameters({"servo.rate": 1e6})
     assert core.config.values["servo.rate"] == 1000.0
+
+
+ENTRIES = {   # every way a set-point reaches the servos: (core, joint 1's value) -> refusal
+    "joint_commands position": lambda core, v: core.on_joint_state_command(
+        NAMES, [v, 0.6], [], []),
+    "joint_commands velocity": lambda core, v: core.on_joint_state_command(
+        NAMES, [], [v, 0.0], []),
+    "position_commands": lambda core, v: core.on_setpoint_command("position", [v, 0.6]),
+    "velocity_commands": lambda core, v: core.on_setpoint_command("velocity", [v, 0.0]),
+}
+
+
+@pytest.mark.parametrize("value", [float("inf"), -float("inf"), 1e300, 1.0000001e6])
+@pytest.mark.parametrize("entry", list(ENTRIES))
+def test_every_way_into_the_set_points_is_range_checked_alike(entry, value):
+    """Issue 39: a JointState with position [inf, 0.6] on joint_commands was taken and the
+    next tick went NaN (the held arm until reset); position_commands refused it. The check
+    is where each value a joint takes is checked (intake.value_refusal), one bound (1e6)."""
+    core = make_core(command_timeout=0.0)
+    reason = ENTRIES[entry](core, value)
+    assert reason is not None and "is not finite or beyond 1e+06" in reason, reason
+    assert core.refused_commands == 1
+    state = ticks(core, 50)
+    assert state.position == pytest.approx([0.3, 0.6], abs=1e-9)       # held as it was
+    assert core.sim.fault is None
+
+
+def test_a_scene_set_point_is_bounded_as_the_commands_are():
+    from arm_sim_ros.physics.scene import SceneError, load_scene
+    with pytest.raises(SceneError, match="beyond 1e"):
+        load_scene("servo_reach").replace(setpoint=(1e300, 0.0))

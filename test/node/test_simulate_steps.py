@@ -201,6 +201,39 @@ def test_a_goal_while_playing_or_while_another_runs_is_aborted_saying_why():
     assert node.core.sim.steps == steps                # nothing stepped
 
 
+def test_stopping_aborts_a_running_goal_and_it_ticks_no_more():
+    """Issue 39: set_simulation_state(STOPPED) during a goal reset the arm and left the goal
+    ticking from the reset state."""
+    node, peer, set_state = paused_node(212)
+    client = ActionClient(node, peer)
+    running, _ = client.send(100_000)
+    for _ in range(3):
+        node.services.poll()
+    reply = set_state.call(node, state=dds_simulation.SimulationState(s.STATE_STOPPED))
+    assert reply.result.result == s.RESULT_OK
+    assert aborted(client, running).endswith("of 100000 steps: set stopped")
+    for _ in range(5):
+        node.services.poll()
+    assert node.core.sim.steps == 0 and node.core.paused
+
+
+def test_a_step_call_and_a_goal_do_not_tick_at_once():
+    node, peer, _ = paused_node(213)
+    client, step = ActionClient(node, peer), sim_client(peer, "step_simulation")
+    running, _ = client.send(100_000)
+    node.services.poll()
+    refused = step.call(node, steps=5).result
+    assert (refused.result, refused.error_message) == (s.RESULT_OPERATION_FAILED,
+                                                     "a simulate_steps goal is running")
+    client.cancel(running)
+    assert client.result(running).status == a.STATUS_CANCELED
+    step.send(steps=50)
+    node.services.poll()
+    second, _ = client.send(3)
+    assert "a step_simulation call is running" in aborted(client, second)
+    assert step.replies(node)[0].result.result == s.RESULT_OK
+
+
 def test_features_list_the_action():
     node, peer = start(153)
     reply = sim_client(peer, "get_simulator_features").call(node)
@@ -224,7 +257,7 @@ def test_the_harness_client_runs_the_action():
 
 class Control:
     """A paused SimulationControl that counts its ticks."""
-    state, ticks = s.STATE_PAUSED, 0
+    state, ticks, epoch, calls = s.STATE_PAUSED, 0, 0, ()
 
     def step(self, n):
         self.ticks += n

@@ -146,6 +146,75 @@ def test_pause_step_n_ticks_with_the_clock_held_then_stop_resets_and_play_runs()
     assert reset.call(node, scope=s.SCOPE_DEFAULT).result.result == s.RESULT_OK
 
 
+def ticks_since(node, before) -> int:
+    return (node.core.sim.steps - before) // node.core.config.steps_per_tick
+
+
+def test_a_step_call_ticks_once_per_pass_and_the_services_answer_meanwhile():
+    """Issue 39: step_simulation(N) computed all N ticks before it published any and answered
+    nothing meanwhile (step(1 000 000) left get_simulation_state unanswered for 15 s). Its
+    ticks come one per pass of the node's loop, as SimulateSteps' do; its reply after the
+    last, each tick published."""
+    node, peer = start(210, scene="servo_hold", publish_rate=100.0)
+    get, set_state, step = (sim_client(peer, name) for name in (
+        "get_simulation_state", "set_simulation_state", "step_simulation"))
+    joint_states, _ = readers(peer)
+    wait_until(lambda: msg.matched(node.joint_state_writer), "joint_states reader")
+    set_state.call(node, state=d.SimulationState(s.STATE_PAUSED))
+    before = node.core.sim.steps
+    seq = step.send(steps=300)
+    wait_until(lambda: node.services.poll() is not None and ticks_since(node, before) > 0,
+               "the first tick")
+    answered = []
+    for _ in range(10):                      # answered while the call ticks
+        assert get.call(node).state.state == s.STATE_PAUSED
+        answered.append(ticks_since(node, before))
+    assert 0 < answered[-1] < 300 and answered == sorted(answered)
+    for _ in range(5):                       # a pass: at most one tick
+        ticked = ticks_since(node, before)
+        node.services.poll()
+        assert ticks_since(node, before) - ticked <= 1
+    reply, = step.replies(node)
+    assert (reply.seq, reply.result.result) == (seq, s.RESULT_OK)
+    assert ticks_since(node, before) == 300
+    assert len(read(joint_states, msg.JointState, 300)) == 300
+
+
+def test_playing_or_stopping_interrupts_a_step_call_saying_how_far_it_came():
+    node, peer = start(211, scene="servo_hold", publish_rate=100.0)
+    set_state, step = (sim_client(peer, name) for name in ("set_simulation_state",
+                                                           "step_simulation"))
+    set_state.call(node, state=d.SimulationState(s.STATE_PAUSED))
+    for target, why in ((s.STATE_STOPPED, "set stopped"), (s.STATE_PLAYING, "set playing")):
+        step.send(steps=100_000)
+        for _ in range(5):
+            node.services.poll()
+        assert set_state.call(node, state=d.SimulationState(target)).result.result == s.RESULT_OK
+        reply, = step.replies(node)
+        assert reply.result.result == s.RESULT_OPERATION_FAILED
+        assert reply.result.error_message.startswith("interrupted after ")
+        assert reply.result.error_message.endswith(f" of 100000 steps: {why}")
+        if target == s.STATE_STOPPED:        # stopped is reset and paused: it stays there
+            for _ in range(5):
+                node.services.poll()
+            assert node.core.sim.steps == 0 and node.core.paused
+
+
+@pytest.mark.parametrize("scope", [s.SCOPE_TIME, s.SCOPE_TIME | s.SCOPE_STATE, s.SCOPE_ALL,
+                                   s.SCOPE_SPAWNED])
+def test_a_reset_scope_the_node_cannot_honour_is_refused_and_resets_nothing(scope):
+    """Time only goes on (a clock that jumps back breaks use_sim_time nodes): a scope that
+    holds it (SCOPE_ALL too) was answered OK with time not reset."""
+    core = ArmSimCore(resolve_parameters({"scene": "servo_hold"}), logging.getLogger("t"),
+                      wall_clock=lambda: 0.0, start_stamp_ns=0)
+    control = s.SimulationControl(core, lambda data: None)
+    core.tick(0.0)
+    code, message = control.reset(scope)
+    assert code == s.RESULT_FEATURE_UNSUPPORTED and "nothing was reset" in message
+    assert core.sim.steps == core.config.steps_per_tick
+    assert control.reset(s.SCOPE_STATE) == (s.RESULT_OK, "") and core.sim.steps == 0
+
+
 @pytest.mark.parametrize("target, code", [(s.STATE_QUITTING, s.RESULT_FEATURE_UNSUPPORTED),
                                           (4, s.INCORRECT_TRANSITION),
                                           (s.STATE_PLAYING, s.ALREADY_IN_TARGET_STATE)])
@@ -306,7 +375,18 @@ def test_on_rclpy_the_same_services_are_served_when_the_package_imports(monkeypa
     assert sorted(call("get_simulator_features").features.features) == list(s.FEATURES)
     paused = types.SimpleNamespace(state=s.STATE_PAUSED)
     assert call("set_simulation_state", state=paused).result.result == s.RESULT_OK
-    assert call("step_simulation", steps=4).result.result == s.RESULT_OK and len(published) == 4
+    step = node.services["step_simulation"][1](types.SimpleNamespace(steps=4),
+                                                types.SimpleNamespace())
+    turns = 0
+    while True:             # the coroutine as rclpy's executor runs it: a tick per turn
+        try:
+            step.send(None)
+        except StopIteration as end:
+            reply = end.value
+            break
+        turns += 1
+        assert len(published) == turns       # one tick per turn of the executor
+    assert reply.result.result == s.RESULT_OK and len(published) == 4
     assert call("get_simulation_state").state.state == s.STATE_PAUSED
     assert call("reset_simulation", scope=s.SCOPE_DEFAULT).result.result == s.RESULT_OK
 

@@ -13,6 +13,8 @@ from arm_sim_ros.physics.trust import accuracy, controller
 from arm_sim_ros.physics.compiled import build as compiled
 from arm_sim_ros.physics.scene import load_scene, preset_names
 from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.stepping import stability
+from physics.test_error_estimate import CASES
 
 pytest.importorskip("numba")
 if os.environ.get("ARM_SIM_COMPILED") == "0":      # .ci/run's pure-Python pass: its second
@@ -32,6 +34,12 @@ SCENES = {
     "release_tolerance_off": load_scene("release").replace(tolerance=0.0),
     "springs_fast_spin": load_scene("springs_oscillation").replace(
         initial_velocities=(30.0, -40.0)),
+    # contracting motions (test_error_estimate), at half the step and twice the damping
+    # (the same d h Lambda): a new count checked at the next step; near the stability limit,
+    # the shadow's local error measured where it is
+    **{name: CASES[name][0].replace(step_size=0.01, damping=2 * CASES[name][0].damping)
+       for name in ("damped_constant_torque_at_a_new_count",
+                    "damped_constant_torque_near_the_stability_limit")},
 }
 
 
@@ -122,6 +130,12 @@ def smooth_runs(draw):
         initial_positions=tuple(draw(st.floats(-1.5, 1.5)) for _ in (0, 1)),
         initial_velocities=tuple(draw(st.floats(-speed, speed)) for _ in (0, 1)),
         tolerance=draw(st.sampled_from([0.0, 1e-9, 1e-7, 5e-5, 1e-3])))
+    if scene.springs is None and scene.motors is None and draw(st.booleans()):
+        # damping up to past RK4's stability limit: steps that barely decay (the shadow's
+        # local error measured where it is), then sub-steps
+        edge = draw(st.floats(0.3, 1.3)) * stability.RK4_REAL_LIMIT
+        scene = scene.replace(damping=edge / (scene.step_size * stability.worst_stiffness(
+            scene.arm)))
     commands = [tuple(draw(st.floats(-10.0, 10.0)) for _ in (0, 1)) for _ in (0, 1, 2)]
     return scene, commands
 

@@ -3,6 +3,7 @@ shadow and its checks, the default) or off (the steps alone: no shadow, no check
 tolerance). An off run takes the steps a global run at tolerance 0 takes, bit for bit, and
 computes nothing else."""
 import math
+from types import SimpleNamespace
 
 import pytest
 
@@ -79,7 +80,8 @@ def test_a_new_command_asks_for_no_check_when_nothing_is_checked():
 
 
 def test_fit_rollouts_run_with_the_estimate_off():
-    scene, substeps = replay_scene(load_scene("damped_release"), "command", 0.01)
+    sampled = SimpleNamespace(dt=0.01, source="a recording at 100 Hz")   # its sampling only
+    scene, substeps = replay_scene(load_scene("damped_release"), "command", sampled)
     assert (scene.estimate, scene.tolerance, substeps) == ("off", 0.0, 1)
 
 

@@ -435,9 +435,9 @@ def test_batch_rollouts_refuse_sensors_and_a_command_delay_in_one_line():
 
 @pytest.mark.parametrize("scene", [
     SWINGING.replace(sensors=CONTRACT),
-    load_scene("servo_hold").replace(sensors=CONTRACT, command_delay=0.002),
+    COMMANDED.replace(sensors=CONTRACT, command_delay=0.002),   # (a servo scene stays on
     load_scene("moving_gravity_compensation").replace(step_size=1e-3, sensors=CONTRACT),
-], ids=["readings", "servo loop", "compensation loop"])
+], ids=["readings", "delayed command", "compensation loop"])      # Python's path: build.py)
 def test_the_compiled_step_reads_the_acting_torque_as_python_does_bit_for_bit(scene,
                                                                              monkeypatch):
     """Under a control loop the drive's code reads the acting torque where a command policy

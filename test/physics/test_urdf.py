@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from arm_sim_ros.interface import JOINT_NAMES
 from arm_sim_ros.node.params.parameters import SPECS, resolve_parameters
@@ -368,3 +369,15 @@ def test_a_long_chain_of_fixed_links_is_read_as_the_arm_without_them():
     plain = urdf.read_urdf((ROOT / "urdf" / "two_link_arm.urdf").read_text())
     chained = urdf.read_urdf(_with_fixed_chain(urdf.MAX_LINKS - 10))
     assert chained.link_masses == plain.link_masses and chained.joint_names == plain.joint_names
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(st.text())
+def test_any_robot_name_is_well_formed_xml_or_refused_in_one_line(robot):
+    """`arm-sim urdf --robot '<&>"'` wrote XML that was not well-formed, with exit 0."""
+    try:
+        text = scene_to_urdf(load_scene("release"), robot=robot)
+    except SceneError as error:
+        assert "XML cannot hold it" in str(error)
+        return
+    assert ET.fromstring(text.encode()).get("name") == robot      # escaped, read back

@@ -230,3 +230,20 @@ def test_the_readers_copy_is_what_git_tracks_and_lies_outside_the_checkout(tmp_p
     assert all((copy / name).is_file() for name in tracked if (ROOT / name).is_file())
     assert not (copy / ".venv").exists() and not (copy / ".git").exists()
     assert ROOT not in copy.resolve().parents
+
+
+def test_every_test_the_reliability_guide_names_exists():
+    """docs/guides/reliability.md gives each promise the test that holds it (a file, then
+    `::name` of a test in the file named last): each is there, so a renamed or removed
+    test shows here."""
+    text = (ROOT / "docs" / "guides" / "reliability.md").read_text()
+    named, last = 0, None
+    for found in re.finditer(r"`(test/[\w/]+\.py|test_\w+\.py)?(?:::(\w+))?`", text):
+        path, name = found.groups()
+        if path:
+            last = ROOT / path if path.startswith("test/") else next((ROOT / "test").rglob(path))
+            assert last.exists(), path
+        if name:
+            assert f"def {name}(" in last.read_text(), f"{last.name}::{name}"
+            named += 1
+    assert named >= 20

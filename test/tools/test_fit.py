@@ -197,7 +197,8 @@ def test_bad_input_gets_one_line(capsys, tmp_path, bag):
 def test_a_fit_that_does_not_converge_says_so_with_its_best_point(capsys, short_bag):
     line = fit(capsys, short_bag, *base_args(payload__mass="2.0"), "--free", "payload.mass",
                "--starts", "1", "--workers", "1", "--max-evaluations", "1", code=1)
-    assert line.startswith("arm-sim: error: the fit did not converge in 1 evaluations")
+    assert line.startswith("arm-sim: error: the fit stopped at the evaluation bound (1 per "
+                           "start, --max-evaluations) before it converged")
     assert "best point: payload.mass = " in line
 
 

@@ -183,7 +183,7 @@ def test_the_reference_and_our_simulator_agree_on_the_hidden_arm():
     from arm_sim_ros.tools.fit.problem import replay_scene, restarted, rollout
 
     rec, exact = recording(1.0)
-    scene, substeps = replay_scene(truth_scene(), "effort", rec.dt)
+    scene, substeps = replay_scene(truth_scene(), "effort", rec)
     ours = rollout(restarted(None, scene, exact[0]), substeps, rec.tau)
     assert np.max(np.abs(ours[:, :2] - exact[:, :2])) < 1e-3 * NOISE[0]
     assert np.max(np.abs(ours[:, 2:] - exact[:, 2:])) < 1e-3 * NOISE[1]

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
@@ -256,3 +257,19 @@ def test_a_step_abandoned_midway_leaves_the_simulator_as_the_step_before_left_it
     assert sim.error_estimate == reference.error_estimate
     assert sim.accumulated_error == reference.accumulated_error
     assert sim.switch_events == reference.switch_events and list(sim.events) == list(reference.events)
+
+
+@pytest.mark.parametrize("ending, code", [("sys.exit(0)", -signal.SIGINT), ("exit_as_main(0)", 0)])
+def test_a_stop_handled_inside_an_exec_still_exits_with_its_code_under_python_m(tmp_path, ending,
+                                                                                 code):
+    """`python -m arm_sim_ros.node.main` stopped by SIGTERM during a first compile (numba and
+    dataclasses exec strings) died by SIGINT one stop in six: CPython notes a KeyboardInterrupt
+    that passed through an exec however it was handled. exit_as_main forgets that note."""
+    (tmp_path / "stopped_in_exec.py").write_text(
+        "import sys\nfrom arm_sim_ros.usage import exit_as_main\n"
+        "try:\n    exec('raise KeyboardInterrupt')\nexcept KeyboardInterrupt:\n    pass\n"
+        f"{ending}\n", encoding="utf-8")
+    done = subprocess.run([sys.executable, "-m", "stopped_in_exec"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60,
+                          env=os.environ | {"PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    assert done.returncode == code, done.stderr

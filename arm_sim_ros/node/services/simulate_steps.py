@@ -7,16 +7,16 @@ As the .action says and Gazebo does, every goal is accepted; one that cannot run
 simulation playing, another goal running, more steps than one call may take) is aborted at
 once with RESULT_OPERATION_FAILED and why. An executing goal ticks exactly `steps` times
 (each tick published, as StepSimulation's), with feedback after each; a cancel stops it
-between two ticks (CANCELED, its result saying how many it took); a play request meanwhile
-aborts it at the next tick. A goal's first tick waits, up to FEEDBACK_WAIT, for a reader of
-the feedback: a client that has just found the server (`ros2 action send_goal --feedback`)
+between two ticks (CANCELED, its result saying how many it took); a play or stop request
+meanwhile aborts it at the next tick. A goal's first tick waits, up to FEEDBACK_WAIT, for a
+reader of the feedback: a client that has just found the server (`ros2 action send_goal --feedback`)
 may not yet be matched with it, and would miss the first ticks' feedback.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .simulation import MAX_STEPS, RESULT_OK, RESULT_OPERATION_FAILED, STATE_PLAYING
+from .simulation import MAX_STEPS, RESULT_OK, RESULT_OPERATION_FAILED, STATE_PLAYING, interrupted
 
 # action_msgs/msg/GoalStatus
 STATUS_UNKNOWN, STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_CANCELING = 0, 1, 2, 3
@@ -36,6 +36,7 @@ class Goal:
     stamp_ns: int                 # when it was accepted (wall clock, as rcl_action stamps)
     status: int = STATUS_ACCEPTED
     completed: int = 0
+    epoch: int = 0                # the control's when accepted (play or stop ends the goal)
     result: tuple = (RESULT_OK, "")
 
     @property
@@ -49,6 +50,8 @@ def refusal(control, steps: int, busy: bool) -> tuple | None:
         return RESULT_OPERATION_FAILED, "simulate_steps needs the simulation paused"
     if busy:
         return RESULT_OPERATION_FAILED, "another simulate_steps goal is running"
+    if control.calls:
+        return RESULT_OPERATION_FAILED, "a step_simulation call is running"
     if steps > MAX_STEPS:
         return RESULT_OPERATION_FAILED, f"{steps} steps is beyond {MAX_STEPS} in one goal"
     return None
@@ -61,10 +64,6 @@ def waiting(stamp_ns: int, now_ns: int, listening: bool) -> bool:
 
 def canceled(done: int, steps: int) -> str:
     return f"canceled after {done} of {steps} steps"
-
-
-def interrupted(done: int, steps: int, why: str) -> str:
-    return f"interrupted after {done} of {steps} steps: {why}"
 
 
 class StepsGoals:
@@ -80,7 +79,7 @@ class StepsGoals:
         goal_id = bytes(goal_id)
         if goal_id in self.goals:
             return None
-        goal = Goal(goal_id, steps, self.clock_ns())
+        goal = Goal(goal_id, steps, self.clock_ns(), epoch=self.control.epoch)
         why = refusal(self.control, steps, self.active() is not None)
         self.goals[goal_id] = goal
         if why is None:
@@ -106,6 +105,10 @@ class StepsGoals:
             return None
         if goal.status == STATUS_CANCELING:
             self._finish(goal, STATUS_CANCELED, RESULT_OK, canceled(goal.completed, goal.steps))
+            return None
+        if goal.epoch != self.control.epoch:      # played or stopped meanwhile
+            self._finish(goal, STATUS_ABORTED, RESULT_OPERATION_FAILED,
+                         interrupted(goal.completed, goal.steps, self.control.why))
             return None
         if goal.remaining:
             code, message = self.control.step(1)

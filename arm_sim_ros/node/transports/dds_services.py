@@ -226,8 +226,10 @@ class DdsServices:
         """Serve `core`'s parameters; announce them as new, as rclpy does when it declares them.
         `control`: the SimulationControl the Simulation Interfaces drive."""
         self.core, self.simulation.control = core, control
+        self.simulation.reply_later = self.reply_later
         if control is not None:
             self.action.attach(control, self.reply_later)
+            control.goal_running = lambda: self.action.busy
         self.log = core.log if self.log is None else self.log
         self.parameters = ps.ParameterServices(core, self.log, self._publish_event)
         self._publish_event(new=[spec.name for spec in ps.PARAMETERS])
@@ -236,8 +238,10 @@ class DdsServices:
 
     def poll(self) -> int:
         """Answer every request waiting and retry pending replies; returns replies sent. A
-        SimulateSteps goal executing takes one tick first (dds_action.py)."""
+        SimulateSteps goal executing (dds_action.py) or a step_simulation call takes one
+        tick first."""
         self.action.advance()
+        self.simulation.advance()
         if not self.pending and not self.waitset.wait(0):
             return 0
         now = time.monotonic()
@@ -262,7 +266,8 @@ class DdsServices:
         """Wait `seconds` (wall time), answering requests as they arrive."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
-            wait = min(left, 0.0 if self.action.busy else 0.005 if self.pending
+            busy = self.action.busy or self.simulation.busy
+            wait = min(left, 0.0 if busy else 0.005 if self.pending
                        else WAIT_SLICE)                             # signals between waits
             self.waitset.wait(duration(seconds=wait))
             self.poll()

@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.annotations import final
-from cyclonedds.idl.types import int64, sequence, uint8, uint16, uint64
+from cyclonedds.idl.types import sequence, uint8, uint16, uint64
 
 from ..services import simulation as sim
+from ..wire.service_types import ros_type_names, service
 
 
 @final
@@ -38,108 +39,23 @@ class SimulatorFeatures(IdlStruct, typename="simulation_interfaces.msg.dds_.Simu
     custom_info: str = ""
 
 
-# --- the services, each with rmw_cyclonedds' request header (guid, seq) first ---------------
+# --- the services (wire/service_types.py: rmw_cyclonedds' request header first) ------------
 
-@final
-@dataclass
-class GetSimulatorFeaturesRequest(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.GetSimulatorFeatures_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    structure_needs_at_least_one_member: uint8 = 0
-
-
-@final
-@dataclass
-class GetSimulatorFeaturesResponse(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.GetSimulatorFeatures_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    features: SimulatorFeatures = field(default_factory=SimulatorFeatures)
-
-
-@final
-@dataclass
-class GetSimulationStateRequest(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.GetSimulationState_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    structure_needs_at_least_one_member: uint8 = 0
-
-
-@final
-@dataclass
-class GetSimulationStateResponse(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.GetSimulationState_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    state: SimulationState = field(default_factory=SimulationState)
-    result: Result = field(default_factory=Result)
-
-
-@final
-@dataclass
-class SetSimulationStateRequest(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.SetSimulationState_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    state: SimulationState = field(default_factory=SimulationState)
-
-
-@final
-@dataclass
-class SetSimulationStateResponse(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.SetSimulationState_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    result: Result = field(default_factory=Result)
-
-
-@final
-@dataclass
-class StepSimulationRequest(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.StepSimulation_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    steps: uint64 = 1
-
-
-@final
-@dataclass
-class StepSimulationResponse(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.StepSimulation_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    result: Result = field(default_factory=Result)
-
-
-@final
-@dataclass
-class ResetSimulationRequest(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.ResetSimulation_Request_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    scope: uint8 = 0
-
-
-@final
-@dataclass
-class ResetSimulationResponse(
-        IdlStruct, typename="simulation_interfaces.srv.dds_.ResetSimulation_Response_"):
-    guid: uint64 = 0
-    seq: int64 = 0
-    result: Result = field(default_factory=Result)
+def _service(name: str, request: dict, response: dict, defaults=None) -> tuple:
+    """(rosidl name, request type, response type) of a simulation_interfaces service."""
+    return (name, *service(f"simulation_interfaces/srv/{name}", request, response, defaults))
 
 
 TYPES = {   # service: (its rosidl name, request type, response type)
-    "get_simulator_features": ("GetSimulatorFeatures", GetSimulatorFeaturesRequest,
-                               GetSimulatorFeaturesResponse),
-    "get_simulation_state": ("GetSimulationState", GetSimulationStateRequest,
-                             GetSimulationStateResponse),
-    "set_simulation_state": ("SetSimulationState", SetSimulationStateRequest,
-                             SetSimulationStateResponse),
-    "step_simulation": ("StepSimulation", StepSimulationRequest, StepSimulationResponse),
-    "reset_simulation": ("ResetSimulation", ResetSimulationRequest, ResetSimulationResponse),
+    "get_simulator_features": _service("GetSimulatorFeatures", {},
+                                       {"features": SimulatorFeatures}),
+    "get_simulation_state": _service("GetSimulationState", {},
+                                     {"state": SimulationState, "result": Result}),
+    "set_simulation_state": _service("SetSimulationState", {"state": SimulationState},
+                                     {"result": Result}),
+    "step_simulation": _service("StepSimulation", {"steps": uint64}, {"result": Result},
+                                defaults={"steps": 1}),
+    "reset_simulation": _service("ResetSimulation", {"scope": uint8}, {"result": Result}),
 }
 
 # RIHS01 hashes (REP 2011) as rosidl computes them for Jazzy from the package's definitions;
@@ -166,16 +82,23 @@ TYPE_HASHES = {
     "simulation_interfaces/srv/ResetSimulation_Response":
         "RIHS01_718428121e0f1755720878d3c28f1688da7581ee5a5d56d26d10d941a28a50a0",
 }
-ROS_TYPE_NAMES = {kind: f"simulation_interfaces/srv/{name}_{suffix}"
-                  for name, request, response in TYPES.values()
-                  for kind, suffix in ((request, "Request"), (response, "Response"))}
+ROS_TYPE_NAMES = ros_type_names(*(kinds for _, *kinds in TYPES.values()))
 
 
 class DdsSimulation:
-    """Request -> reply fields for each service, over a SimulationControl (attach it)."""
+    """Request -> reply fields for each service, over a SimulationControl (attach it, and
+    `reply_later(service, reply, request)`); `advance()` between polls: one tick of a
+    step_simulation call, answered after its last."""
 
     def __init__(self):
-        self.control = None
+        self.control = self.reply_later = None
+
+    def advance(self) -> bool:
+        return self.control is not None and self.control.advance()
+
+    @property
+    def busy(self) -> bool:
+        return self.control is not None and bool(self.control.calls)
 
     def services(self) -> list:
         """(service, request type, response type, handler) for DdsServices."""
@@ -195,8 +118,13 @@ class DdsSimulation:
     def _set(self, request) -> dict:
         return {"result": Result(*self.control.set_state(request.state.state))}
 
-    def _step(self, request) -> dict:
-        return {"result": Result(*self.control.step(request.steps))}
+    def _step(self, request) -> dict | None:
+        def done(code, message):
+            response = TYPES["step_simulation"][2]
+            self.reply_later("step_simulation", response(
+                guid=request.guid, seq=request.seq, result=Result(code, message)), request)
+        now = self.control.call_steps(request.steps, done)
+        return None if now is None else {"result": Result(*now)}
 
     def _reset(self, request) -> dict:
         return {"result": Result(*self.control.reset(request.scope))}

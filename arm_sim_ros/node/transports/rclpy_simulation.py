@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 
 from ..services.simulate_steps import canceled, interrupted, refusal, waiting
-from ..services.simulation import RESULT_OK
+from ..services.simulation import RESULT_OK, RESULT_OPERATION_FAILED
 
 
 def serve(node, control) -> list:
@@ -41,18 +41,32 @@ def serve(node, control) -> list:
             return response
         return handler
 
+    async def step(request, response):
+        """A tick per turn of the executor, which answers other requests between two."""
+        answered = []
+        now = control.call_steps(request.steps, lambda *result: answered.append(result))
+        while now is None and not answered:
+            control.advance()
+            await Turn()
+        code, message = now or answered[0]
+        response.result = Result(result=code, error_message=message)
+        return response
+
+    running = []      # the SimulateSteps goal executing (executor)
+    control.goal_running = lambda: bool(running)
+
     return [
         node.create_service(srv.GetSimulatorFeatures, "get_simulator_features", features),
         node.create_service(srv.GetSimulationState, "get_simulation_state", get_state),
         node.create_service(srv.SetSimulationState, "set_simulation_state",
                             answer(lambda request: control.set_state(request.state.state))),
-        node.create_service(srv.StepSimulation, "step_simulation",
-                            answer(lambda request: control.step(request.steps))),
+        node.create_service(srv.StepSimulation, "step_simulation", step),
         node.create_service(srv.ResetSimulation, "reset_simulation",
                             answer(lambda request: control.reset(request.scope))),
         ActionServer(node, SimulateSteps, "simulate_steps",
                      execute_callback=executor(control, SimulateSteps, Result, lambda: (
-                         node.count_subscribers("simulate_steps/_action/feedback") > 0)),
+                         node.count_subscribers("simulate_steps/_action/feedback") > 0),
+                                               running),
                      cancel_callback=lambda goal_handle: CancelResponse.ACCEPT),
     ]
 
@@ -65,11 +79,12 @@ class Turn:
         yield
 
 
-def executor(control, action, result_type, listening):
+def executor(control, action, result_type, listening, running=None):
     """SimulateSteps' execute callback: a tick, its feedback, a turn of the executor; a goal
     that cannot run (simulate_steps.refusal) is aborted saying why. `listening()`: the
-    feedback has a reader (the first tick waits a moment for one)."""
-    running = []
+    feedback has a reader (the first tick waits a moment for one); `running`: the goal
+    executing, kept there."""
+    running = [] if running is None else running
 
     async def execute(goal_handle):
         steps, done = goal_handle.request.steps, 0
@@ -81,9 +96,11 @@ def executor(control, action, result_type, listening):
                 while waiting(accepted, time.monotonic_ns(), listening()) and \
                         not goal_handle.is_cancel_requested:
                     await Turn()
+                epoch = control.epoch
                 while done < steps and not goal_handle.is_cancel_requested:
-                    code, why = control.step(1)
-                    if code != RESULT_OK:           # set playing meanwhile
+                    code, why = (RESULT_OPERATION_FAILED, control.why) if (
+                        control.epoch != epoch) else control.step(1)
+                    if code != RESULT_OK:           # set playing or stopped meanwhile
                         message = interrupted(done, steps, why)
                         break
                     done += 1

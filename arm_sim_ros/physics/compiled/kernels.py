@@ -21,19 +21,20 @@ def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
     order, known, zvalid, lost, said_lost, fault = I[12], I[13], I[14], I[15], I[16], I[17]
     h, E0, R0, R1, largest, far, in_play = F[0], F[1], F[2], F[3], F[4], F[5], F[6]
     estimate, previous, tolerance, den, target = F[7], F[8], F[9], F[10], F[11]
-    factor, lowest, orderf = F[12], F[13], F[14]
+    factor, lowest, orderf, stiff_below = F[12], F[13], F[14], F[15]
     state = ({items},)
     shade = ({zitems},)
     done, code, sound = 0, 0, -1
     while done < left:
 CHECK
         new_every, wanted, count = every, n, n     # count: this step's sub-steps
+        z1, at_shadow = state, False              # the shadow's step, taken in the check
         if not check:                         # a plain step, the shadow beside it
 PLAIN
         else:                                 # a check (accuracy.py)
 CHECKED
             if known == 1:
-                new_every = scheduled(G, L, every)
+                new_every = scheduled(G, L, every, steps + 1 - since)
 AFTER
         # the shadow (shadow.Shadow.follow: from the corrected state, less the local error)
         local_known = known == 1 or check
@@ -49,7 +50,9 @@ SHADOW
             taken += (n * (steps - since) if n > 1 else 0) + (count if count > 1 else 0)
             since, estimate, previous = steps + 1, error, kept
             booked(L, G, states, count, wanted, orderf)
-            n, every, due, known = wanted, new_every, steps + NEXT, 1
+            # a new count's error is measured at the next step (accuracy.book)
+            n, every, due, known = wanted, new_every, steps + (NEXT if wanted == count
+                                                               else 1), 1
         if local_known and lost == 0:
             for k in range(states):
                 O[k] = new[k] - z[k]
@@ -123,12 +126,20 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 if (wanted >= cap and capped == 0 and scaled > target) or (
                         wanted > most and wanted > 2 * max(1, most)):   # said: Python's
                     code = 1
-                    break''',
-    SHADOW='''            if zvalid == 0:
-                for k in range({width}):
-                    z[k] = state[k] - O[k] if k < states else state[k]
-                now_shade = ({zitems},)
-            z1 = substepped(now_shade, h, count, K)''')
+                    break
+            if count < stiff_below and lost == 0:   # accuracy.at_shadow: G measured there
+                if zvalid == 0:
+                    for k in range({width}):
+                        z[k] = state[k] - O[k] if k < states else state[k]
+                    shade = ({zitems},)
+                    zvalid = 1
+                z1, at_shadow = doubled(shade, h, count, K, G, factor, states, False, G)[0], True''',
+    SHADOW='''            if not at_shadow:
+                if zvalid == 0:
+                    for k in range({width}):
+                        z[k] = state[k] - O[k] if k < states else state[k]
+                    now_shade = ({zitems},)
+                z1 = substepped(now_shade, h, count, K)''')
 
 KERNELS = '''
 @njit(cache=True)
@@ -233,8 +244,9 @@ def ask(n, ratio, previous, order, floor, cap):
 
 
 @njit(cache=True)
-def scheduled(G, L, every):
-    """shadow.next_every: steps to the next check after one that measured G (L predicted)."""
+def scheduled(G, L, every, spacing):
+    """shadow.next_every: steps to the next check after one that measured G (L predicted),
+    `spacing` steps after the last."""
     change, size = 0.0, {ROUNDING!r}
     for k in range(4):
         change = bigger(change, abs(G[k] - L[k])) if k else abs(G[k] - L[k])
@@ -244,7 +256,7 @@ def scheduled(G, L, every):
         size = bigger(size, abs(L[k]))
     if change > {ROUGH!r} * size:
         return max({MIN_EVERY!r}, every // 2)
-    if change < {SMOOTH!r} * size:
+    if change < {SMOOTH!r} * size and spacing >= every:
         return min({MAX_EVERY!r}, 2 * every)
     return every
 

@@ -33,7 +33,7 @@ class Kernel:
         width = 4 + len(dynamics.extra) + len(dynamics.channels)
         self.y, self.z, self.L, self.O, self.G, self.S, self.D = (np.zeros(width)
                                                                   for _ in range(7))
-        self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(15)
+        self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(16)
         self.command, self.lowest = dynamics.command, None
         self.switched = None      # a switching scene's runs in one mode (switch_run.py)
 
@@ -73,7 +73,7 @@ class Kernel:
             I[:] = (sim.steps, NEVER, sim.steps, 0, n, 1, n, n, n, n, 1, 4, 4, 0, 0, 0, 1,
                     sim.books_fault is not None)
             F[:] = (h, sim.initial_energy, *sim.retired, largest, 0.0, sim.energy_in_play,
-                    books.error_estimate, 1.0, 0.0, 1.0, 1.0, 1.0, self.lowest, 4.0)
+                    books.error_estimate, 1.0, 0.0, 1.0, 1.0, 1.0, self.lowest, 4.0, 0.0)
             done, code, sound = run(self.y, self.z, self.L, self.O, self.G, self.S, I, F, K,
                                     self.C, left, *more)
             return self.landed(sim, done, code, sound, largest)
@@ -92,7 +92,7 @@ class Kernel:
         F[:] = (h, sim.initial_energy, *sim.retired, largest, shadow.largest,
                 sim.energy_in_play, books.error_estimate, books.free.previous, books.tolerance,
                 SAFETY * books.target(h), books.target(h), books.factor, self.lowest,
-                float(books.order))
+                float(books.order), books.stiff_below)
         done, code, sound = run(self.y, self.z, self.L, self.O, self.G, self.S, I, F, K,
                                 self.C, left, *more)
         if not done:

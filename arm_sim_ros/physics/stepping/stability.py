@@ -140,6 +140,11 @@ def bound(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, exact=
     return h * decay, real_stability_limit(tableau), "d h lambda_max"
 
 
+def stiff_names(effects, arm: ArmParameters) -> str:
+    """The effects that make a step stiff, as the plan names them (damping+servo)."""
+    return "+".join(e.name for e in effects if e.stiffness(arm) or e.frequency(arm))
+
+
 def substeps_needed(ratio: float, limit: float) -> int:
     """Sub-steps for a step whose d h Lambda is `ratio`: 1 (plain RK4) while it is stable;
     anything above MAX_SUBSTEPS (even an infinite ratio) counts as MAX_SUBSTEPS + 1."""
@@ -149,15 +154,16 @@ def substeps_needed(ratio: float, limit: float) -> int:
     return ceil(needed) if needed <= MAX_SUBSTEPS else MAX_SUBSTEPS + 1   # NaN lands here too
 
 
-def substepping(step, substeps: int):
+def substepping(step, substeps: int, stiff: str = "damping"):
     """step(f, y, h) as `substeps` equal steps of h / substeps; `step` itself when 1.
-    Past MAX_SUBSTEPS every step raises ValueError instead of freezing its caller."""
+    Past MAX_SUBSTEPS every step raises ValueError instead of freezing its caller, naming
+    `stiff`, what makes it stiff (stiff_names)."""
     if substeps == 1:
         return step
     if substeps > MAX_SUBSTEPS:
         def refuse(f, y, h):
             raise StepRefused(f"it needs more than {MAX_SUBSTEPS} sub-steps to stay stable; "
-                             "reduce step_size or damping")
+                             f"reduce step_size or the stiffness of {stiff}")
         return refuse
 
     def advance(f, y, h):
@@ -228,7 +234,7 @@ def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
         substeps_needed(ratio, limit), exact_substeps(effects, arm, h) if exact else 1)
     message = None
     if substeps > 1:
-        stiff = "+".join(e.name for e in effects if e.stiffness(arm) or e.frequency(arm))
+        stiff = stiff_names(effects, arm)
         message = (f"{what} = {ratio:.4g} ({stiff}) exceeds {tableau.name}'s stability limit "
                    f"{limit:.4g}: each {h:g} s step is taken as {substeps} sub-steps")
     return ratio, limit, substeps, message

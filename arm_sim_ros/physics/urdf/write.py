@@ -7,9 +7,12 @@ effort_limits, damping and Coulomb friction; the rest stays in the scene.
 """
 from __future__ import annotations
 
+import re
+from xml.sax.saxutils import quoteattr
+
 from ...interface import JOINT_NAMES
 from ..model import MAX_ANGLE
-from ..scene import Scene
+from ..scene import Scene, SceneError
 from .read import NO_EFFORT_LIMIT
 
 ROD_RADIUS = 0.02          # m: the links' cylinders
@@ -17,6 +20,8 @@ HOUSING_RADIUS = 0.06      # m: the shoulder's cylinder
 # <limit> needs a velocity (urdfdom refuses one without); the physics sets no speed limit,
 # so it writes a bound far above what a simulated scene reaches, which nothing enforces.
 VELOCITY_LIMIT = 1000.0    # rad/s
+# What XML 1.0 cannot carry at all, escaped or not (its Char production).
+NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 COLORS = (("link1_blue", "0.25 0.55 0.95 1"), ("link2_orange", "0.95 0.55 0.2 1"))
 
 HEADER = """<?xml version="1.0"?>
@@ -47,11 +52,14 @@ def scene_to_urdf(scene: Scene, robot: str = "two_link_arm") -> str:
     """The URDF of `scene`'s arm: links base_link, arm_plane, link1, link2, tip; joints
     plane_joint (fixed), shoulder_joint, elbow_joint (continuous, or revolute with joint
     limits), tip_joint (fixed)."""
+    if not robot or NOT_XML.search(robot):
+        raise SceneError(f"robot name {robot!r}: XML cannot hold it (an empty name, or a "
+                         "control character)")
     links = scene.links
     pair = scene.damping if isinstance(scene.damping, tuple) else (scene.damping,) * 2
     friction = scene.friction["coulomb"] if scene.friction else (0.0, 0.0)
     ranges = _ranges(scene)
-    parts = [HEADER, f'<robot name="{robot}">\n',
+    parts = [HEADER, f'<robot name={quoteattr(robot)}>\n',
              '  <material name="base_grey"><color rgba="0.6 0.6 0.6 1"/></material>\n']
     parts += [f'  <material name="{name}"><color rgba="{rgba}"/></material>\n'
               for name, rgba in COLORS]

@@ -10,8 +10,14 @@ YAML that `arm-sim run --scene` takes, the report as a PNG or a Rerun recording
 each is first fitted alone (all starts of all recordings in parallel), then all together
 from the median of those fits; the text and --json give each recording's own values too.
 
-Exit codes: 0 fitted, 1 the fit did not converge (one line with the best point found),
-2 bad input (one line).
+Every fit ends within bounds it states (bounds.py: steps per sample, the problem's size,
+evaluations per start, wall time) and says why it stopped; its verdict says whether the
+fitted model explains the recording (within 2 x the noise on every channel).
+
+Exit codes: 0 the fitted model explains the recording, 1 a bound was reached before the
+fit converged (one line: why, and the best point found), 2 bad input (one line), 3 the fit
+converged but the model does not explain the recording (the outputs are written, the
+verdict says by how much: the base scene lacks something the arm has).
 """
 from __future__ import annotations
 
@@ -26,10 +32,18 @@ from ...interface import JOINT_NAMES
 from ...outputs import check_output, clear_output, strict_json, write_text
 from ...physics.scene import Scene
 from ..arguments import add_scene_arguments, scene_from_args
+from . import bounds as b
 from .data import FitError, read_recording
 from .keys import check_free, parse_free, with_values
 from .problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, starts
 from .stats import uncertainty, validate, warnings_for
+
+CONNECT_SECONDS = 10.0      # a --scheduler that has not answered by then is given up
+CONNECT_GRACE = 5.0         # then Client's own timeout may still say why (refused, not Dask)
+
+
+class Stopped(Exception):
+    """A bound reached with nothing to report but why (exit code 1)."""
 
 DEFAULT_STARTS = 2          # the base scene's values and one spread start; more: --starts
 DEFAULT_EVALUATIONS = 60     # least-squares iterations of one start before it gives up
@@ -53,7 +67,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--joint-names", default=",".join(JOINT_NAMES),
                    help=f"the recording's joint names (default {','.join(JOINT_NAMES)})")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="local processes for the starts (default: the CPU count)")
+                   help="local processes for the starts (default and most: the CPU count)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the starts on a Dask cluster, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
@@ -64,52 +78,87 @@ def add_parser(subparsers) -> None:
                    help=f"fraction held out at the end (default {VALIDATION_FRACTION:g})")
     p.add_argument("--max-evaluations", type=int, default=DEFAULT_EVALUATIONS,
                    help=f"per start (default {DEFAULT_EVALUATIONS})")
+    p.add_argument("--max-seconds", type=float, default=b.DEFAULT_SECONDS,
+                   help=f"wall time of the whole fit, s (default {b.DEFAULT_SECONDS:g}): "
+                        "each start stops there with its best point")
     p.add_argument("--force", action="store_true", help="replace an existing -o or --report")
     p.set_defaults(func=cmd_fit)
 
 
-def cmd_fit(args) -> int:
-    started = time.perf_counter()
+def checked_args(args) -> tuple:
+    """The joint names, and every option a person could give wrong refused in one line."""
     for name, low in (("workers", 1), ("starts", 1), ("max_evaluations", 1)):
         if getattr(args, name) < low:
             raise FitError(f"--{name.replace('_', '-')} must be at least {low}")
     if not (args.segment > 0 and 0 <= args.validation < 0.9):
         raise FitError("--segment must be positive seconds and --validation a fraction below 0.9")
+    if not 0 < args.max_seconds < float("inf"):
+        raise FitError(f"--max-seconds {args.max_seconds:g} must be a positive number of seconds")
+    names = tuple(n.strip() for n in args.joint_names.split(","))
+    if len(names) != 2 or not all(names):
+        raise FitError(f"--joint-names {args.joint_names!r}: two names, shoulder first")
+    if names[0] == names[1]:
+        raise FitError(f"--joint-names {args.joint_names!r} names {names[0]} twice: the "
+                       "shoulder and the elbow are two joints")
+    paths = [os.path.realpath(path) for path in args.bags]
+    for k, path in enumerate(paths):
+        if path in paths[:k]:
+            raise FitError(f"{args.bags[k]} is given twice: a recording counts once")
+    cpus = os.cpu_count() or 1
+    if args.workers > cpus and not args.scheduler:
+        print(f"arm-sim: --workers {args.workers}: {cpus} processes, one per CPU",
+              file=sys.stderr)
+        args.workers = cpus
+    return names
+
+
+def cmd_fit(args) -> int:
+    started, deadline = time.perf_counter(), time.time() + args.max_seconds
+    names = checked_args(args)
     wanted = ((args.output, "-o", (".yaml", ".yml")), (args.report, "--report", (".png", ".rrd")))
     outputs = [check_output(path, option, args.force, suffixes=suffixes)
                for path, option, suffixes in wanted if path is not None]
     base = scene_from_args(args)
     free = parse_free(args.free, base)
     check_free(base, free)
-    names = tuple(n.strip() for n in args.joint_names.split(","))
-    if len(names) != 2 or not all(names):
-        raise FitError(f"--joint-names {args.joint_names!r}: two names, shoulder first")
     recordings = [read_recording(path, names, args.torque_topic) for path in args.bags]
     mode = "commands" if args.torque_topic else "effort"
     problem = Problem(base, free, recordings, mode, args.segment, args.validation)
+    b.check_size(problem)
     points = starts(len(free), args.starts)
     # Every start on every recording alone, in parallel; several recordings are then
     # fitted together from the median of their own fits (one more start, near the optimum).
     alone = [problem] if len(recordings) == 1 else [
         Problem(base, free, [r], mode, args.segment, args.validation) for r in recordings]
-    results = run_tasks(fit_from, [(p, x0, args.max_evaluations) for p in alone for x0 in points],
-                        args.workers, args.scheduler)
+    try:
+        results = run_tasks(fit_from, [(p, x0, args.max_evaluations, deadline) for p in alone
+                                       for x0 in points], args.workers, args.scheduler, deadline)
+    except Stopped as stop:
+        print(f"arm-sim: error: {stop}", file=sys.stderr)
+        return b.STOPPED_CODE
     per_recording = [min(results[k * len(points):(k + 1) * len(points)], key=lambda r: r["cost"])
                      for k in range(len(alone))]
     if len(recordings) > 1:
         joint = np.median([r["xp"] for r in per_recording], axis=0)
-        results = [fit_from(problem, joint, args.max_evaluations)]
-    outcome = summarise(problem, results, names)
+        results = [fit_from(problem, joint, args.max_evaluations, deadline)]
+    best = min(results, key=lambda r: r["cost"])
+    if best["status"] <= 0:           # stopped at a bound: why, and where it got to
+        point = ", ".join(f"{p.key} = {v:.6g}" for p, v in zip(free, problem.values(best["xp"])))
+        print(f"arm-sim: error: the fit stopped at "
+              f"{b.stopped(best, args.max_evaluations, args.max_seconds)} before it converged, "
+              f"from each of {len(points)} starts; best point: {point}", file=sys.stderr)
+        return b.STOPPED_CODE
+    outcome = summarise(problem, results, names, deadline)
     outcome["start_count"] = len(points)
     outcome["recordings"] = [{"source": r.source, "values": problem.values(best["xp"]).tolist(),
                               "converged": best["status"] > 0}
                              for r, best in zip(recordings, per_recording)]
     outcome["seconds"] = time.perf_counter() - started
-    if not outcome["converged"]:
-        best = ", ".join(f"{p['key']} = {p['value']:.6g}" for p in outcome["parameters"])
-        print(f"arm-sim: error: the fit did not converge in {args.max_evaluations} evaluations "
-              f"from any of {len(points)} starts; best point: {best}", file=sys.stderr)
-        return 1
+    outcome["bounds"] = b.bounds(args)
+    outcome["stopped"] = b.stopped(results[outcome["best_start"]], args.max_evaluations,
+                                   args.max_seconds)
+    outcome["verdict"] = b.verdict(outcome)
+    outcome["explains"] = outcome["verdict"]["explains"]
     for path in outputs:
         clear_output(path)
     fitted = fitted_scene(problem, outcome)
@@ -120,24 +169,24 @@ def cmd_fit(args) -> int:
         from .report import write_report
         write_report(args.report, problem, outcome, names)
     print(strict_json(public(outcome)) if args.json else describe(problem, outcome, names))
-    return 0
+    return b.EXPLAINED_CODE if outcome["explains"] else b.UNEXPLAINED_CODE
 
 
-def run_tasks(function, tasks, workers: int, scheduler: str | None) -> list:
+def run_tasks(function, tasks, workers: int, scheduler: str | None, deadline: float) -> list:
     """function(*task) for every task, in order: on a Dask cluster at `scheduler`, else on
     `workers` local processes (1: here). Each task is deterministic, so the results are the
-    same wherever they run."""
+    same wherever they run; each stops at `deadline` (time.time()) by itself, and a cluster
+    that has returned nothing by then is given up (Stopped)."""
     if scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise FitError("--scheduler needs Dask: pip install 'arm_sim_ros[fit]'") from None
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError, ValueError) as error:
-            raise FitError(f"--scheduler {scheduler}: cannot reach it ({error})") from None
-        with client:
-            return client.gather([client.submit(function, *task, pure=False) for task in tasks])
+        from distributed import wait
+        with connected(scheduler) as client:
+            futures = [client.submit(function, *task, pure=False) for task in tasks]
+            try:
+                wait(futures, timeout=max(1.0, deadline - time.time() + CONNECT_SECONDS))
+            except TimeoutError:
+                raise Stopped(f"--scheduler {scheduler}: no result within the wall-time bound "
+                              "(--max-seconds): does it have workers?") from None
+            return client.gather(futures)
     if workers <= 1 or len(tasks) <= 1:
         return [function(*task) for task in tasks]
     from concurrent.futures import ProcessPoolExecutor
@@ -147,7 +196,40 @@ def run_tasks(function, tasks, workers: int, scheduler: str | None) -> list:
         return list(pool.map(function, *zip(*tasks)))
 
 
-def summarise(problem: Problem, results, names) -> dict:
+def connected(scheduler: str):
+    """A Dask client of `scheduler`, or FitError in one line: no Dask, nobody there, not a
+    Dask scheduler (an HTTP port answers nonsense), or silent past CONNECT_SECONDS (Client's
+    own timeout does not cover a server that accepts and says nothing)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise FitError("--scheduler needs Dask: pip install 'arm_sim_ros[fit]'") from None
+    import threading
+
+    made = []
+
+    def connect():
+        try:
+            made.append(Client(scheduler, timeout=f"{CONNECT_SECONDS:g}s"))
+        except BaseException as error:   # noqa: BLE001 - whatever it is, it is said below
+            made.append(error)
+
+    thread = threading.Thread(target=connect, daemon=True)
+    thread.start()
+    thread.join(CONNECT_SECONDS + CONNECT_GRACE)
+    if not made:
+        raise FitError(f"--scheduler {scheduler}: no answer in {CONNECT_SECONDS:g} s (is it a "
+                       "Dask scheduler, e.g. tcp://host:8786?)")
+    if isinstance(made[0], BaseException):
+        error = made[0]
+        kind = "cannot reach it" if isinstance(error, (OSError, TimeoutError)) else (
+            "not a Dask scheduler (is it its dashboard's HTTP port?)")
+        raise FitError(f"--scheduler {scheduler}: {kind} ({type(error).__name__}: "
+                       f"{str(error)[:120]})")
+    return made[0]
+
+
+def summarise(problem: Problem, results, names, deadline=None) -> dict:
     """The best start, its uncertainties, warnings and validation, as plain data."""
     best = min(range(len(results)), key=lambda i: results[i]["cost"])
     r = results[best]
@@ -177,7 +259,7 @@ def summarise(problem: Problem, results, names) -> dict:
                      "chi2_per_residual": chi2,
                      "segments": len(problem.training)},
         "noise": [s.tolist() for s in problem.sigma],
-        "validation": validate(problem, xp),
+        "validation": validate(problem, xp, deadline),
         "starts": [{"cost": x["cost"], "status": x["status"], "evaluations": x["nfev"],
                     "message": x["message"]} for x in results],
         "best_start": best, "cost_history": r["history"], "states": states, "runs": runs,
@@ -260,6 +342,14 @@ def describe(problem: Problem, outcome: dict, names) -> str:
             f"{p.key} = {v:.6g}" for p, v in zip(problem.free, r["values"]))
             for r in outcome["recordings"]]
     lines += [f"warning: {w}" for w in outcome["warnings"]]
+    verdict, bound = outcome["verdict"], outcome["bounds"]
+    lines.append(("verdict: the model explains the recording" if verdict["explains"] else
+                  "verdict: the model does NOT explain the recording")
+                 + f" (at worst {verdict['worst_noise_multiple']:.3g} x the noise, "
+                   f"{verdict['where']}; the rule: {verdict['rule']})")
+    lines.append(f"stopped: {outcome['stopped']}; bounds: {bound['evaluations_per_start']} "
+                 f"evaluations per start, {bound['seconds']:g} s, "
+                 f"{bound['steps_per_sample']} steps per sample")
     if outcome.get("scene"):
         lines.append(f"wrote {outcome['scene']}")
     return "\n".join(lines)

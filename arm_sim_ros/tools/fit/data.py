@@ -97,12 +97,12 @@ def checked(source: str, t, q, qd, tau) -> Recording:
 
 
 def _read_csv(path: Path):
-    try:
-        with open(path, newline="") as stream:
+    try:    # utf-8-sig: a spreadsheet's byte-order mark is not part of the first column's name
+        with open(path, newline="", encoding="utf-8-sig") as stream:
             rows = list(csv.reader(stream))
     except (OSError, UnicodeDecodeError) as error:
         raise FitError(f"cannot read {path}: {getattr(error, 'strerror', None) or error}") from None
-    header = rows[0] if rows else []
+    header = [name.strip() for name in rows[0]] if rows else []
     missing = [c for c in CSV_NEEDED if c not in header]
     if missing:
         raise FitError(f"{path}: no column {', '.join(missing)}; a fit reads "
@@ -118,9 +118,19 @@ def _read_csv(path: Path):
     return data[:, 0], data[:, 1:3], data[:, 3:5], data[:, 5:7]
 
 
+def _brief(error: Exception, limit: int = 100) -> str:
+    """rosbags' message on one line, cut at `limit` characters: a damaged message
+    definition is quoted whole, over many lines."""
+    line = " ".join(str(error).split())
+    return (line[:limit] + " ...") if len(line) > limit else (line or "no detail")
+
+
 def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
     from rosbags.highlevel import AnyReader, AnyReaderError
 
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        raise FitError(f"cannot read bag {path}: it holds no metadata.yaml (a rosbag2 "
+                       "directory does; `ros2 bag reindex` writes one)")
     wanted = None if torque_topic is None else "/" + torque_topic.lstrip("/")
     if wanted is not None and wanted not in TORQUE_TOPICS:
         raise FitError(f"--torque-topic {torque_topic}: one of {', '.join(TORQUE_TOPICS)}")
@@ -139,8 +149,15 @@ def _read_bag(path: Path, joints: tuple, torque_topic: str | None):
             commands = [] if wanted is None else [
                 (log_time, _command(bag.deserialize(raw, c.msgtype), joints))
                 for c, log_time, raw in bag.messages(connections=[topics[wanted]])]
+    except FitError:
+        raise
+    except OSError as error:
+        raise FitError(f"cannot read bag {path}: {error.strerror or error}") from None
     except AnyReaderError as error:
-        raise FitError(f"cannot read bag {path}: {error}") from None
+        raise FitError(f"cannot read bag {path}: {_brief(error)}") from None
+    except Exception as error:  # noqa: BLE001 - corrupt bytes fail in a dozen ways in rosbags
+        raise FitError(f"cannot read bag {path}: it is damaged ({type(error).__name__}: "
+                       f"{_brief(error)})") from None
     if not samples:
         raise FitError(f"{path}: /{JOINT_STATES_TOPIC} holds no message")
     stamps = np.array([s[0] for s in samples], dtype=np.int64)

@@ -13,12 +13,19 @@ Gaussian noise on the measured positions and velocities; a scene with `sensors` 
 their readings, as the node publishes them. For a real arm, --torques writes
 the same schedule as a CSV (t, tau1, tau2) for its controller to play, and the recording
 of that run is what to fit.
+
+Exit codes: 0 written; 1 the run cannot be a recording to fit (the simulation faulted: the
+bag is removed; a joint never moved: the bag is kept, the line says why); 2 bad input (one
+line), such as a scene whose servos follow set-points and ignore the torque.
 """
 from __future__ import annotations
 
+import sys
+from math import isfinite
+
 import numpy as np
 
-from ...interface import FLOAT64_MULTI_ARRAY, JOINT_STATE
+from ...interface import FLOAT64_MULTI_ARRAY, JOINT_NAMES, JOINT_STATE
 from ...outputs import check_output, clear_output, write_text
 from ...physics.scene import parse_value
 from ..arguments import add_scene_arguments, scene_from_args
@@ -49,7 +56,9 @@ def multisine(duration: float, rate: float, peaks, band=BAND):
 
 
 def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), seed: int = 0):
-    """Run the multi-sine through our Simulator and write the bag at `path`."""
+    """Run the multi-sine through our Simulator and write the bag at `path`: (the
+    simulator, whether each joint moved). It stops at a refused step (the simulator's fault
+    says why: the caller removes the bag)."""
     from ...physics.simulator import Simulator
     from ...recording.bags.bag import BagWriter, joint_state, torque_command
 
@@ -58,6 +67,7 @@ def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), s
     policy = scene.policy if scene.policy.startswith("command") else "command"
     sim = Simulator(scene.replace(policy=policy, step_size=1.0 / (rate * substeps)))
     rng = np.random.default_rng(seed)
+    start, moved = sim.state[:2], [False, False]
     with BagWriter(path) as bag:
         bag.add_topic("/joint_states", JOINT_STATE)
         bag.add_topic("/joint_torque_commands", FLOAT64_MULTI_ARRAY)
@@ -72,7 +82,10 @@ def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), s
             bag.write("/joint_torque_commands", ns, torque_command((t1, t2)))
             for _ in range(substeps):
                 sim.step()
-    return sim
+            if sim.fault is not None:
+                break
+            moved = [m or q != q0 for m, q, q0 in zip(moved, sim.state[:2], start)]
+    return sim, moved
 
 
 def add_parser(subparsers) -> None:
@@ -86,7 +99,7 @@ def add_parser(subparsers) -> None:
                         f"limits, else {DEFAULT_PEAK[0]:g},{DEFAULT_PEAK[1]:g})")
     p.add_argument("--noise", default="0,0", metavar="RAD,RAD_PER_S",
                    help="Gaussian noise on the recorded q and qd (default none)")
-    p.add_argument("--seed", type=int, default=0, help="of the noise")
+    p.add_argument("--seed", type=int, default=0, help="of the noise (a whole number >= 0)")
     p.add_argument("--torques", metavar="PATH.csv", help="also write the schedule t, tau1, tau2")
     p.add_argument("--force", action="store_true", help="replace existing outputs")
     p.set_defaults(func=cmd_excite)
@@ -104,10 +117,20 @@ def cmd_excite(args) -> int:
     else:
         peaks = DEFAULT_PEAK
     noise = parse_value("constant_torque", args.noise)
-    if len(peaks) != 2 or len(noise) != 2 or min(peaks) <= 0 or min(noise) < 0:
-        raise FitError("--peak needs two positive torques and --noise two numbers >= 0")
+    if len(peaks) != 2 or not all(isfinite(p) and p > 0 for p in peaks):
+        raise FitError(f"--peak {args.peak}: two positive, finite torques in N m")
+    if len(noise) != 2 or not all(isfinite(n) and n >= 0 for n in noise):
+        raise FitError(f"--noise {args.noise}: two finite numbers >= 0 (rad, rad/s)")
+    if args.seed < 0:
+        raise FitError(f"--seed {args.seed}: a whole number >= 0")
     if scene.effort_limits is not None and any(p > e for p, e in zip(peaks, scene.effort_limits)):
         raise FitError(f"--peak {list(peaks)} exceeds the effort limits {list(scene.effort_limits)}")
+    deaf = [f"joint {i + 1} ({kind})" for i, kind in enumerate(
+        (scene.servo or {}).get("interface", ("effort", "effort"))) if kind != "effort"]
+    if deaf:
+        raise FitError(f"scene {scene.name}: its servos follow set-points on {', '.join(deaf)} "
+                       "and ignore the torque: the multi-sine would not move the arm (--set "
+                       "servo.interface=effort,effort, or a scene without servos)")
     bag = check_output(args.bag, "bag", args.force, directory=True)
     torques = args.torques and check_output(args.torques, "--torques", args.force, suffixes=(".csv",))
     for path in (bag, torques):
@@ -117,7 +140,19 @@ def cmd_excite(args) -> int:
         t, tau = multisine(duration, args.rate, peaks)
         write_text(torques, "t,tau1,tau2\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in
                                                      zip(t.tolist(), *tau.T.tolist())), "--torques")
-    sim = record(scene, bag, duration, args.rate, peaks, noise, args.seed)
+    sim, moved = record(scene, bag, duration, args.rate, peaks, noise, args.seed)
+    if sim.fault is not None:
+        clear_output(bag)
+        print(f"arm-sim: error: the simulation faulted, so no recording was written: "
+              f"{sim.fault} (peaks {peaks[0]:g}, {peaks[1]:g} N m: lower --peak, or a finer "
+              "--step)", file=sys.stderr)
+        return 1
     print(f"wrote {bag}: {duration:g} s of a multi-sine at {args.rate:g} Hz, peaks "
           f"{peaks[0]:g}, {peaks[1]:g} N m; final q = ({sim.state[0]:.4f}, {sim.state[1]:.4f}) rad")
+    still = [name for name, m in zip(JOINT_NAMES, moved) if not m]
+    if still:
+        print(f"arm-sim: error: {' and '.join(still)} never moved in {bag}: a fit learns "
+              "nothing of it (static friction or a limit holds it? raise --peak)",
+              file=sys.stderr)
+        return 1
     return 0

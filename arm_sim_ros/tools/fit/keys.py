@@ -70,11 +70,14 @@ def parse_free(text: str, scene: Scene) -> list[FreeParameter]:
     if not keys:
         raise FitError("--free needs at least one scene key, e.g. --free damping,payload.mass")
     free = [p for key in keys for p in _parameters(key, scene)]
-    seen = set()
+    seen = {}
     for p in free:
         if p.key in seen:
             raise FitError(f"--free names {p.key} twice")
-        seen.add(p.key)
+        whole = seen.get((p.field, p.name))      # a scalar key and one of its joints
+        if whole is not None and (whole.index is None) != (p.index is None):
+            raise FitError(f"--free names {whole.key} and {p.key}: the same number twice")
+        seen[p.key] = seen[(p.field, p.name)] = p
     return free
 
 

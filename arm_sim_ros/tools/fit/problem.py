@@ -27,12 +27,14 @@ segments are independent), so a Jacobian costs n_parameters + 4 simulations of t
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...physics.scene import SceneError
 from ...physics.simulator import Simulator
+from .bounds import MAX_STEPS_PER_SAMPLE, check_sampling
 from .data import FitError
 from .keys import start_values, with_values
 from .observe import SENSING_KEYS, Observation
@@ -54,10 +56,10 @@ def noise_level(recording) -> np.ndarray:
     return np.maximum(1.4826 * mad / np.sqrt(70.0), NOISE_FLOOR)
 
 
-def replay_scene(base, mode: str, dt: float):
+def replay_scene(base, mode: str, recording):
     """The scene that replays a recording's torque: the `effort` is what the joints received
     (no policy, limits or windings again); commands go through the scene's drive chain."""
-    substeps = max(1, int(np.ceil(dt / base.step_size - 1e-9)))
+    substeps, dt = check_sampling(recording, base.step_size), recording.dt
     changes = {"step_size": dt / substeps, "tolerance": 0.0, "estimate": "off",
                "sensors": None, "command_delay": 0.0,     # seen through them: observe.py
                "initial_positions": (0.0, 0.0), "initial_velocities": (0.0, 0.0)}
@@ -98,7 +100,7 @@ class Problem:
         if mode == "effort" and any(self.free[i].field == "command_delay" for i in self.sensing):
             raise FitError("--free command_delay needs the commands (--torque-topic): the "
                            "JointState effort is the torque as it acts, already delayed")
-        self.replays = [replay_scene(base, mode, r.dt) for r in self.recordings]
+        self.replays = [replay_scene(base, mode, r) for r in self.recordings]
         self.sigma = [noise_level(r) for r in self.recordings]
         self.scale = np.abs(np.array(start_values(self.free, base), dtype=float))
         self.lower = np.array([p.lower for p in self.free]) / self.scale
@@ -147,6 +149,8 @@ class Problem:
             scene, substeps = scenes[k]
             start = self.measured(segment)[0] - offset + self.sigma[k] * s
             sims[k] = sim = restarted(sims.get(k), scene, start)
+            if sim.substeps * substeps > MAX_STEPS_PER_SAMPLE:   # refused: bounds.py
+                return None
             run = rollout(sim, substeps, torques[k][segment.start:segment.stop])
             out.append(seen.readings(run, self.recordings[k].dt) if self.observed else run)
         return out
@@ -221,27 +225,38 @@ def starts(n: int, count: int, seed: int = 0) -> list[np.ndarray]:
     return [np.ones(n)] + list(spread)
 
 
+class OutOfTime(Exception):
+    """The wall-time bound passed within an evaluation."""
+
+
 def solve(problem: Problem, xp0, segments, max_nfev: int | None = None,
-          with_parameters: bool = True, states0=None) -> dict:
+          with_parameters: bool = True, states0=None, deadline: float | None = None) -> dict:
     """least_squares from scaled parameters xp0 (fixed unless `with_parameters`) and
-    measured start states: the scaled x, cost per iteration, status and message."""
+    measured start states: the scaled x, cost per iteration, status and message. Past
+    `deadline` (time.time()) it stops with the best point it evaluated (status -3)."""
     from scipy.optimize import least_squares
 
     n = problem.n_parameters if with_parameters else 0
     xp0 = np.asarray(xp0, dtype=float)
     states0 = np.zeros(4 * len(segments)) if states0 is None else states0
     split = (lambda x: (x[:n], x[n:])) if with_parameters else (lambda x: (xp0, x))
-    cache, history = {}, []
+    cache, history, best = {}, [], {}
 
     def fun(x):
+        if deadline is not None and time.time() > deadline and best:
+            raise OutOfTime
         xp, states = split(x)
         cache["x"], cache["r"] = x.copy(), problem.residuals(xp, states, segments)
         r = np.concatenate(cache["r"])
         if not history:                     # the cost at the start
             history.append(0.5 * float(r @ r))
+        if not best or 0.5 * float(r @ r) < best["cost"]:
+            best.update(x=x.copy(), cost=0.5 * float(r @ r), fun=r)
         return r
 
     def jac(x):
+        if deadline is not None and time.time() > deadline:
+            raise OutOfTime             # a Jacobian costs n + 4 simulations: not begun
         if "x" not in cache or not np.array_equal(cache["x"], x):
             fun(x)
         return problem.jacobian(*split(x), segments, cache["r"], with_parameters)
@@ -249,16 +264,30 @@ def solve(problem: Problem, xp0, segments, max_nfev: int | None = None,
     x0 = np.concatenate([xp0, states0]) if with_parameters else states0
     lower = np.concatenate([problem.lower, np.full(len(states0), -np.inf)]) if with_parameters \
         else -np.inf
-    result = least_squares(fun, x0, jac=jac, bounds=(lower, np.inf), method="trf",
-                           tr_solver="exact", max_nfev=max_nfev, x_scale=1.0,
-                           callback=lambda intermediate_result: history.append(
-                               float(intermediate_result.cost)))
-    xp, states = split(result.x)
-    return {"xp": np.array(xp), "states": np.array(states), "cost": float(result.cost),
-            "history": history, "status": int(result.status), "message": str(result.message),
-            "nfev": int(result.nfev), "residuals": len(result.fun)}
+    def callback(intermediate_result):
+        history.append(float(intermediate_result.cost))
+        if deadline is not None and time.time() > deadline:
+            raise StopIteration
+
+    try:
+        result = least_squares(fun, x0, jac=jac, bounds=(lower, np.inf), method="trf",
+                               tr_solver="exact", max_nfev=max_nfev, x_scale=1.0,
+                               callback=callback)
+        x, cost, status, message = result.x, float(result.cost), int(result.status), str(
+            result.message)
+        nfev, residuals = int(result.nfev), len(result.fun)
+    except OutOfTime:
+        result = None
+    if result is None or status == -2:      # the wall-time bound: the best point seen
+        x, cost, status, message = best["x"], best["cost"], -3, "wall-time bound reached"
+        nfev, residuals = len(history), len(best["fun"])
+    xp, states = split(x)
+    return {"xp": np.array(xp), "states": np.array(states), "cost": cost,
+            "history": history, "status": status, "message": message,
+            "nfev": nfev, "residuals": residuals}
 
 
-def fit_from(problem: Problem, xp0, max_nfev: int | None = None) -> dict:
+def fit_from(problem: Problem, xp0, max_nfev: int | None = None,
+             deadline: float | None = None) -> dict:
     """One start of a multi-start fit (a task for a process pool or a Dask worker)."""
-    return solve(problem, xp0, problem.training, max_nfev)
+    return solve(problem, xp0, problem.training, max_nfev, deadline=deadline)

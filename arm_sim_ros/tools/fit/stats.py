@@ -79,13 +79,13 @@ def stuck(runs, joint) -> bool:
     return False
 
 
-def validate(problem: Problem, xp) -> dict | None:
+def validate(problem: Problem, xp, deadline=None) -> dict | None:
     """The held-out segments simulated with the fitted parameters: only their start states
     are fitted (four numbers against the whole segment). RMS error per channel (rad,
     rad/s) and as a multiple of the noise (1: at the noise level)."""
     if not problem.validation:
         return None
-    result = solve(problem, xp, problem.validation, with_parameters=False)
+    result = solve(problem, xp, problem.validation, with_parameters=False, deadline=deadline)
     runs = problem.simulate(xp, result["states"], problem.validation)
     errors = np.vstack([run - problem.measured(g) for run, g in zip(runs, problem.validation)])
     sigma = np.vstack([np.broadcast_to(problem.sigma[g.recording], (g.stop - g.start, 4))

@@ -45,6 +45,10 @@ def cmd_send_torque(args) -> int:
             raise UsageError(f"{name} {value} must be a positive number")
     if args.duration is not None and not (isfinite(args.duration) and args.duration >= 0):
         raise UsageError(f"--duration {args.duration} must be a finite number >= 0")
+    bad = [f"{t:g}" for t in args.torques if not isfinite(t)]
+    if bad:              # the node would refuse it: said here, before joining the network
+        raise UsageError(f"send-torque {' '.join(f'{t:g}' for t in args.torques)}: "
+                         f"{', '.join(bad)} is not a torque (finite N m)")
     from ...node.wire.messages import check_topic_name
 
     check_topic_name(args.topic, "--topic")   # before joining the network
@@ -52,7 +56,6 @@ def cmd_send_torque(args) -> int:
         raise UsageError(f"--topic {args.topic}: {problem} (the arm_sim node's topic); "
                          f"send-torque publishes {FLOAT64_MULTI_ARRAY} torques: leave --topic "
                          f"out for {COMMAND_TOPIC}")
-    # Non-finite torques are sent as given: the node refuses them, which is worth seeing.
     publisher = TorquePublisher(args.topic)
     if not publisher.wait_for_subscriber(args.wait):
         others = publisher.other_types()
@@ -112,17 +115,23 @@ class TorquePublisher:
             time.sleep(0.02)
         return True
 
-    def send(self, torques) -> None:
+    def send(self, torques, acknowledged: bool = True) -> None:
         self.writer.write(self._msg.Float64MultiArray(data=[float(t) for t in torques]))
-        self.writer.wait_for_acks(self._seconds(1.0))  # delivered before we exit
+        if acknowledged:
+            self.writer.wait_for_acks(self._seconds(1.0))  # delivered before we exit
 
     def repeat(self, torques, rate: float, duration: float | None) -> None:
-        start = time.monotonic()
-        sent = 0
-        while duration is None or sent / rate < duration:
-            self.send(torques)
-            sent += 1
-            time.sleep(max(0.0, start + sent / rate - time.monotonic()))
+        """At `rate` until `duration` s (wall) have passed: each message written on its
+        schedule (waiting for acknowledgements at each held the rate near 10 Hz), the last
+        acknowledged."""
+        start, sent = time.monotonic(), 0
+        try:
+            while duration is None or sent / rate < duration:
+                self.send(torques, acknowledged=False)
+                sent += 1
+                time.sleep(max(0.0, start + sent / rate - time.monotonic()))
+        finally:
+            self.writer.wait_for_acks(self._seconds(1.0))   # delivered before we exit
 
     @staticmethod
     def _seconds(s: float) -> int:
