@@ -25,7 +25,7 @@ setup(
         share("urdf", "*.xml"),
         share("rviz", "*.rviz"),
     ],
-    python_requires=">=3.10",
+    python_requires=">=3.11",
     # Pinned: what CI and the README install. On a ROS machine rosdep supplies numpy/yaml.
     install_requires=[
         "numpy==2.4.6",
@@ -38,7 +38,8 @@ setup(
         "tqdm==4.70.1",          # progress on a terminal
     ],
     extras_require={
-        "test": ["pytest==9.0.3", "hypothesis==6.155.2"],
+        "test": ["pytest==9.0.3", "hypothesis==6.155.2",
+                 "pytest-xdist==3.8.0"],   # the suite on every core (setup.cfg: -n auto)
         "bench": ["mujoco==4.0.0"],
         "fit": ["dask==2026.8.0", "distributed==2026.8.0"],   # arm-sim fit --scheduler
         "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled/build.py)

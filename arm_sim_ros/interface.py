@@ -68,6 +68,22 @@ ACTIONS = {
     "simulate_steps": ("simulation_interfaces/action/SimulateSteps", "N ticks while paused, "
                        "with feedback after each"),
 }
+# Every topic the node publishes or takes, by its absolute name in the root namespace, with
+# its one type: a tool asked to put another type on one of these names refuses (wrong_type).
+KNOWN_TOPICS = {"/" + name.lstrip("/"): kind
+                for name, (kind, _) in (PUBLISHES | SUBSCRIBES).items()}
+
+
+def wrong_type(topic: str, message_type: str) -> str | None:
+    """Why `message_type` cannot go on `topic` (a relative name as in the root namespace),
+    or None: one of the node's topics carries its own type, and no other."""
+    name = "/" + topic.lstrip("/")
+    known = KNOWN_TOPICS.get(name)
+    if known is None or known == message_type:
+        return None
+    return f"{name} carries {known}, not {message_type}"
+
+
 # What the node publishes and takes, by absolute name (as a bag of it lists them).
 TRUE_JOINT_STATES = f"/{NODE_NAME}/true_joint_states"
 NODE_TOPICS = {"/" + JOINT_STATES_TOPIC: JOINT_STATE,

@@ -5,6 +5,7 @@ Every layer may raise `UsageError`; the front ends (`arm-sim`, `arm_sim_node`) p
 from __future__ import annotations
 
 import argparse
+import difflib
 import sys
 import unicodedata
 
@@ -16,7 +17,8 @@ EXIT_CODES = {
     FAULT: "the work failed: `arm-sim run` faulted (a step was refused: `fault` and "
            "`refused_steps` in `--json`), `arm-sim fit` stopped at a bound before it converged "
            "(which, and the best point), `arm-sim excite` faulted (no bag) or recorded a joint "
-           "that never moved, `arm-sim send-torque` found no subscriber",
+           "that never moved, `arm-sim send-torque` found no subscriber, `arm-sim record` "
+           "received no message (no bag is left)",
     UNEXPLAINED: "`arm-sim fit` converged, but the fitted model does not explain the "
                  "recording (its verdict: more than 2 x the noise); the outputs are written",
     REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "
@@ -54,3 +56,10 @@ def one_line(message) -> str:
     value (a newline, a carriage return...) are shown escaped, never acted on."""
     return "".join(repr(c)[1:-1] if unicodedata.category(c).startswith("C") else c
                    for c in str(message))
+
+
+def did_you_mean(word: str, choices) -> str:
+    """`did you mean 'x'? ` for the choice closest to a misspelt `word` (a '-' for a '_'
+    too), or "" when none is close."""
+    close = difflib.get_close_matches(word.replace("-", "_"), list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""

@@ -5,7 +5,9 @@
 # scripts start in well under a second and work with no network.
 #   ensure_venv EXTRAS    (EXTRAS: "" for the package alone, "test,bench" for the suite;
 #                          the extra `fast`, numba, comes with either where it has a wheel)
-# Needs: root (this checkout, absolute) and venv set by the caller.
+# Needs: root (this checkout, absolute) and venv set by the caller. The venv is made with
+# $ARM_SIM_PYTHON (default python3); a Python older than setup.py's python_requires is
+# refused in one line before pip runs (the pinned numpy and scipy would not install).
 
 setup_stamp() {   # what a stamp must hold for this checkout's setup.py
   local hash
@@ -17,11 +19,32 @@ setup_stamp() {   # what a stamp must hold for this checkout's setup.py
   printf '%s %s\n' "$hash" "$root"
 }
 
+python_too_old() {   # PYTHON WHAT FIX: true, after one line, when PYTHON is older than setup.py asks
+  local python="$1" what="$2" fix="$3" need have
+  need=$(sed -n 's/.*python_requires *= *">= *\([0-9][0-9.]*\)".*/\1/p' "$root/setup.py")
+  [ -n "$need" ] || return 1
+  have=$("$python" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null) || {
+    echo "scripts: error: $what does not run; arm_sim_ros needs Python $need or newer" >&2
+    return 0; }
+  if [ "$(printf '%s\n%s\n' "$need" "$have" | sort -V | head -n1)" = "$need" ]; then
+    return 1
+  fi
+  echo "scripts: error: $what is Python $have; arm_sim_ros needs $need or newer (its pinned numpy and scipy do): ${fix//NEED/$need}" >&2
+  return 0
+}
+
 ensure_venv() {
-  local extras="$1" stamp want target
+  local extras="$1" stamp want target python="${ARM_SIM_PYTHON:-python3}"
+  if [ -x "$venv/bin/python" ] && [ ! -f "$venv/.arm_sim_ros-installed${extras:+-$extras}" ] &&
+      python_too_old "$venv/bin/python" "the venv $venv" \
+        "remove it and run again with ARM_SIM_PYTHON=pythonNEED (or newer)"; then
+    exit 1
+  fi
   if [ ! -x "$venv/bin/python" ]; then
-    echo "scripts: creating the venv $venv (once)" >&2
-    python3 -m venv "$venv" || {
+    python_too_old "$python" "$python" \
+      "install Python NEED or newer and run again with ARM_SIM_PYTHON=pythonNEED" && exit 1
+    echo "scripts: creating the venv $venv with $python (once)" >&2
+    "$python" -m venv "$venv" || {
       echo "scripts: error: could not create a venv at $venv; on Debian/Ubuntu: apt-get install python3-venv" >&2
       exit 1; }
   fi

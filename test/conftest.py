@@ -16,17 +16,101 @@ ARM_SIM_KEEP_TEARDOWN=1 for such runs. It also ends the calling process when pyt
 in-process (pytest.main() from a script); set the variable there too. A usage error (e.g. a
 bad -k expression, still propagating while pytest unconfigures) keeps the normal teardown:
 pytest prints its message only afterwards.
+
+The suite leaves the checkout as it found it: `git status` (ignored files too, each with its
+size and time) is taken before the first test and compared after the last, by the process
+that runs the suite (not its xdist workers); any difference fails the run (exit 1) with the
+paths, whatever each test reported. Left out: what Python
+and pip keep there (byte code, numba's cache beside it, the venvs, *.egg-info) and pytest's
+own .pytest_cache. Hypothesis keeps its files in a temporary directory, not in .hypothesis/
+of the working directory, and draws the same examples every run (derandomize, no database):
+the suite is deterministic.
 """
 import os
+import shutil
+import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import pytest
+from hypothesis import configuration, settings
 
+CHECKOUT = Path(__file__).resolve().parents[1]
+BEFORE, CHANGED = pytest.StashKey[dict](), pytest.StashKey[list]()
 _session = []
+_hypothesis_home = Path(tempfile.mkdtemp(prefix="arm_sim_hypothesis_"))
+configuration.set_hypothesis_home_dir(_hypothesis_home)
+settings.register_profile("arm_sim", derandomize=True, database=None)
+settings.load_profile("arm_sim")
+
+
+def checkout_state(root: Path = CHECKOUT) -> dict | None:
+    """{path: (git status, size, mtime)} of everything git sees in `root`, ignored files
+    included, one by one; None where `root` is not the top of a git work tree."""
+    try:
+        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=root,
+                             capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    if Path(top).resolve() != root.resolve():
+        return None
+    venvs = {p.parent.name for p in root.glob("*/pyvenv.cfg")}
+    leave_out = [f":(exclude){name}" for name in sorted(venvs | {".pytest_cache"})] + [
+        ":(exclude,glob)**/__pycache__/**", ":(exclude,glob)**/*.egg-info/**"]
+    listed = subprocess.run(["git", "status", "--porcelain=v1", "-z", "--ignored=traditional",
+                             "--untracked-files=all", "--", ".", *leave_out], cwd=root,
+                            capture_output=True, check=True).stdout.decode()
+    state, records = {}, iter(listed.split("\0"))
+    for record in records:
+        if not record:
+            continue
+        status, path = record[:2], record[3:]
+        if status[0] in "RC":
+            next(records, None)              # the rename's source follows
+        try:
+            stat = os.lstat(root / path)
+            state[path] = (status, stat.st_size, stat.st_mtime_ns)
+        except OSError:
+            state[path] = (status, None, None)
+    kept = venvs | {".git", ".pytest_cache", "__pycache__"}
+    for entry in root.iterdir():           # git lists no directory that holds no file
+        if entry.is_dir() and entry.name not in kept and not entry.name.endswith(".egg-info"):
+            state.setdefault(f"{entry.name}/", ("dir", None, None))
+    return state
+
+
+def changed_paths(before: dict, after: dict) -> list:
+    """`new PATH`, `removed PATH`, `changed PATH`: what differs between two states."""
+    return [f"{'new' if p not in before else 'removed' if p not in after else 'changed'} {p}"
+            for p in sorted(set(before) | set(after)) if before.get(p) != after.get(p)]
 
 
 def pytest_sessionstart(session):
     _session[:] = [session]
+    session.config.stash[CHANGED] = []
+    # the run's own process says it; an xdist worker is a part of the run
+    worker = hasattr(session.config, "workerinput")
+    session.config.stash[BEFORE] = None if worker else checkout_state()
+
+
+def pytest_sessionfinish(session):
+    shutil.rmtree(_hypothesis_home, ignore_errors=True)
+    before = session.config.stash.get(BEFORE, None)
+    after = checkout_state() if before is not None else None
+    if after is not None and (changed := changed_paths(before, after)):
+        session.config.stash[CHANGED] = changed
+        if session.exitstatus in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED):
+            session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    if changed := config.stash.get(CHANGED, []):
+        terminalreporter.section("the checkout changed", red=True)
+        terminalreporter.line("The suite must leave the checkout as it found it; these changed "
+                              "while it ran (a test wrote there, or you did meanwhile):")
+        for line in changed:
+            terminalreporter.line(f"  {line}")
 
 
 @pytest.hookimpl(trylast=True)

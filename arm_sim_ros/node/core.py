@@ -16,7 +16,7 @@ from ..interface import NODE_NAME
 from ..physics.effects import servo
 from ..physics.scene import angle_warning, load_scene
 from ..physics.urdf.read import changed_values, read_urdf
-from ..physics.simulator import ROUTINE, Simulator, abs_residual
+from ..physics.simulator import Simulator, abs_residual
 from .commands.callbacks import CommandInput
 from .commands.intake import CommandIntake, RateLimitedLog
 from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_values
@@ -67,12 +67,12 @@ class ArmSimCore(CommandInput):
                                  self.late_ticks)
 
     def _on_sim_event(self, event) -> None:
-        """What the simulator does later reaches the log as it happens (a fault: _advance)."""
+        """Said at the event's level as it happens (a fault: _advance), warnings rate-limited."""
         text = f"{event.message} (at t = {event.t:.6f} s)"
-        if event.kind in ROUTINE or event.kind == "books":  # stick, slip, sub-steps; books off
-            (self.log.info if event.kind in ROUTINE else self.log.error)(text)
-        elif event.kind != "fault":
+        if event.level == "warning":
             self.warnings.warning(event.kind, text)
+        elif event.kind != "fault":
+            (self.log.info if event.level == "info" else self.log.error)(text)
 
     def set_parameters(self, changes: dict) -> list:
         """Runtime parameter changes as one transaction (rebuild.py): the new physics built
@@ -229,10 +229,13 @@ class ArmSimCore(CommandInput):
 
 
 def started(config: NodeConfig) -> str:
-    """The start line; with a robot_description, every scene value the URDF replaced."""
+    """The start line: the recording's file, if any (scripts/run names a new one each run);
+    with a robot_description, every scene value the URDF replaced."""
     scene, values = config.scene, config.values
     text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
             f"{config.steps_per_tick} steps per tick")
+    if values["rerun_path"]:
+        text += f"; recording {values['rerun_path']}"
     if values["robot_description"]:
         base = load_scene(values["scene"])
         changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))

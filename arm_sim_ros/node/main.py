@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, stop)
     try:
-        args = build_parser().parse_args(ours)
+        args = parse_ours(ours)
         if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:
             raise UsageError(f"--duration {args.duration:g} must be a number of seconds from 0 "
                              f"to {MAX_DURATION:g}")
@@ -145,6 +145,24 @@ def main(argv=None) -> int:
         return REFUSED
     except KeyboardInterrupt:
         return DONE
+
+
+ROS_FLAGS = ("-p", "--param", "--params-file", "-r", "--remap", "--log-level", "-e",
+             "--enclave")
+
+
+def parse_ours(ours: list) -> argparse.Namespace:
+    """The node's own options; ROS arguments given without --ros-args are refused with the
+    command line that would take them (rcl reads them only after --ros-args)."""
+    try:
+        return build_parser().parse_args(ours)
+    except UsageError as error:
+        ros = [a for a in ours if a in ROS_FLAGS or ":=" in a]
+        if not ros:
+            raise
+        at = ours.index(ros[0])
+        fixed = " ".join(["arm_sim_node", *ours[:at], "--ros-args", *ours[at:]])
+        raise UsageError(f"{error}; ROS arguments go after --ros-args: {fixed}") from None
 
 
 def _print_status(line: str) -> None:

@@ -5,7 +5,6 @@ A scene is data: presets live in config/scenes/*.yaml. Every value passes throug
 """
 from __future__ import annotations
 
-import difflib
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
@@ -13,6 +12,7 @@ from math import inf, isfinite, pi, radians
 from pathlib import Path
 
 from .. import yaml_files
+from ..usage import did_you_mean
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
@@ -180,7 +180,7 @@ class Scene:
             elif key in FIELD_KINDS:
                 merged[key] = value
             else:
-                raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+                raise SceneError(unknown_key(key))
         if merged.get("estimate") == "off" and "tolerance" not in merged:
             merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
@@ -285,18 +285,27 @@ def _effect_value(name, parameter, value):
         raise SceneError(str(error)) from None
 
 
+def unknown_key(key: str) -> str:
+    """Why `key` is no scene key, with the closest one (an effect's keys as effect.key)."""
+    keys = [f"{effect}.{p.name}" for effect, cls in MAPPINGS.items() for p in cls.parameters]
+    hint = did_you_mean(key, FIELD_KINDS) or did_you_mean(key, keys) or next(
+        (f"did you mean {k!r}? " for k in keys if k.endswith(f".{key}")), "")
+    return f"unknown scene key {key!r}; {hint}known keys: {', '.join(FIELD_KINDS)}"
+
+
 def parse_value(key: str, text: str):
     """A value as the command line writes it: numbers, pairs as `1,0`, text."""
     effect, dot, name = key.partition(".")
     if dot and effect in MAPPINGS:
         known = {p.name: p for p in MAPPINGS[effect].parameters}
         if name not in known:
-            raise SceneError(f"{key} is not a key of {effect}; its keys: {', '.join(known)}")
+            hint = did_you_mean(key, [f"{effect}.{k}" for k in known])
+            raise SceneError(f"{key} is not a key of {effect}; {hint}its keys: {', '.join(known)}")
         kind = known[name].kind
     elif key in FIELD_KINDS:
         kind = FIELD_KINDS[key]
     else:
-        raise SceneError(f"unknown scene key {key!r}; known keys: {', '.join(FIELD_KINDS)}")
+        raise SceneError(unknown_key(key))
     if kind in ("float_or_pair", "pair_or_none"):
         kind = "pair" if "," in text else "float"
     if kind == "effect":
@@ -356,8 +365,7 @@ def scene_dirs() -> list[Path]:
 
 
 def preset_names() -> list[str]:
-    dirs = scene_dirs()
-    return sorted({p.stem for d in dirs[:1] for p in d.glob("*.yaml")})
+    return sorted({p.stem for d in scene_dirs()[:1] for p in d.glob("*.yaml")})
 
 
 def load_scene(name: str = "release") -> Scene:
@@ -373,10 +381,8 @@ def load_scene(name: str = "release") -> Scene:
         if _is_file(path):
             return scene_from_file(path, name)
     names = preset_names()
-    close = difflib.get_close_matches(name.replace("-", "_"), names, n=1, cutoff=0.6)
-    hint = f"did you mean {close[0]!r}? " if close else ""
-    raise SceneError(f"unknown scene {name!r}; {hint}presets: {', '.join(names) or 'none found'} "
-                     "(or give a path to a .yaml file)")
+    raise SceneError(f"unknown scene {name!r}; {did_you_mean(name, names)}presets: "
+                     f"{', '.join(names) or 'none found'} (or give a path to a .yaml file)")
 
 
 def _is_file(path: Path) -> bool:
@@ -391,8 +397,7 @@ def scene_from_file(path: Path, name: str) -> Scene:
         data = yaml_files.load(path, "scene file")
     except yaml_files.YamlFileError as error:
         raise SceneError(str(error)) from None
-    data = {} if data is None else data
-    if not isinstance(data, dict):
+    if not isinstance(data := {} if data is None else data, dict):
         raise SceneError(f"scene file {path} must hold a mapping of keys to values")
     try:
         return Scene(name=name).replace(**data)

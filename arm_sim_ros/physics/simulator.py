@@ -31,20 +31,27 @@ from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
-# Event kinds that say what the simulator does as designed, not that anything went wrong:
-# a stick, slip or impact (switch), and the tolerance raising the sub-steps it takes
-# (substeps). Said at info; the others (a tolerance not met, a fault ...) are warnings.
-ROUTINE = ("switch", "substeps")
+# How loud each kind of event is, for every listener (the node's log, a recording's text
+# log, arm-sim run): what the physics does by design is information (a switch, the
+# tolerance taking more sub-steps, a chaotic motion becoming unpredictable); what costs
+# accuracy or time is a warning (substepping, accuracy, saturation, servo); a refused step
+# or broken books an error.
+LEVELS = {"switch": "info", "substeps": "info", "unpredictable": "info",
+          "books": "error", "fault": "error"}
 
 
 @dataclass(frozen=True)
 class Event:
     """Something the simulator did that a person should hear about (kind: substepping,
-    substeps, switch, fault, saturation, books, accuracy, servo)."""
+    substeps, unpredictable, accuracy, fault, saturation...), at its LEVELS level."""
 
     t: float
     kind: str
     message: str
+
+    @property
+    def level(self) -> str:
+        return LEVELS.get(self.kind, "warning")
 
 
 @dataclass(frozen=True)

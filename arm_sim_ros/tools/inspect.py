@@ -35,9 +35,7 @@ def cmd_inspect(args) -> int:
 
     path = Path(args.recording)
     if not path.is_file():
-        raise UsageError(f"{args.recording}: " + ("a directory, not a Rerun .rrd file (a "
-                                                  "bag? `arm-sim fit` reads bags)" if
-                                                  path.is_dir() else "no such file"))
+        raise UsageError(not_a_recording(path, args.recording))
     if args.every < 1:
         raise UsageError(f"--every {args.every} must be at least 1")
     try:
@@ -54,6 +52,18 @@ def cmd_inspect(args) -> int:
     for row in rows[::args.every]:
         out.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
     return 0
+
+
+def not_a_recording(path: Path, given: str) -> str:
+    """Why `path` is no file to inspect: a bag directory, another directory, or nothing."""
+    if (path / "metadata.yaml").is_file():
+        return (f"{given} is a bag (a rosbag2 directory); inspect reads Rerun recordings "
+                f"(.rrd): `ros2 bag info {given}`, or read the bag with the rosbags library "
+                "(README, Read a recording); `arm-sim run --bag B --rerun F.rrd` writes one run "
+                "as both")
+    if path.is_dir():
+        return f"{given} is a directory; inspect reads a Rerun recording file (.rrd)"
+    return f"{given}: no such file"
 
 
 def add_parser(subparsers) -> None:

@@ -513,7 +513,7 @@ def test_send_torque_command_line(monkeypatch, capsys):
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("CYCLONEDDS_URI", CONFIG)
     assert cli_main(["send-torque", "1", "0", "--once", "--wait", "0.2"]) == 1
-    assert "no subscriber on joint_torque_commands" in capsys.readouterr().out
+    assert "no subscriber on joint_torque_commands" in capsys.readouterr().err
     assert cli_main(["send-torque", "1", "0", "--rate", "0"]) == 2
     assert "--rate 0.0 must be a positive number" in capsys.readouterr().err
     # refused before joining the network: no wait for discovery (issue 39)

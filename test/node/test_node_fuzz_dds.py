@@ -93,6 +93,7 @@ def finite(state):
                + list(state.effort))
 
 
+@pytest.mark.hunt
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(burst=requests)

@@ -6,6 +6,7 @@ import math
 import random
 import time
 
+import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from arm_sim_ros import interface
@@ -114,6 +115,7 @@ parameter_changes = st.lists(
     min_size=1, max_size=2).map(dict)
 
 
+@pytest.mark.hunt
 @settings(max_examples=200, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(changes=parameter_changes)

@@ -186,7 +186,7 @@ def test_the_slowest_node_still_stops_on_sigterm_at_once(tmp_path):
 def test_a_tick_of_minutes_stops_on_one_sigterm():
     """The elbow reaches a compliant stop of damping 1e8 in the second tick, which (with the
     cap on sub-steps raised) would take minutes: SIGTERM ends the node from inside it."""
-    env = os.environ | {"ROS_DOMAIN_ID": "201", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = os.environ | {"ROS_DOMAIN_ID": "206", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen(
         [sys.executable, "-c", "import sys\nfrom arm_sim_ros.physics.stepping import stability\n"
          "stability.MAX_SUBSTEPS = 10 ** 9\n"
@@ -233,7 +233,7 @@ sys.exit(main(sys.argv[1:]))
 
 
 def test_a_signal_whose_interrupt_a_c_callback_drops_still_stops_the_node():
-    env = os.environ | {"ROS_DOMAIN_ID": "202", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    env = os.environ | {"ROS_DOMAIN_ID": "207", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen([sys.executable, "-c", SIGNAL_IN_A_CALLBACK, "--transport",
                                 "dds", "--quiet"], env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
@@ -300,7 +300,7 @@ def test_a_recording_node_keeps_its_threads_across_live_changes_and_new_files(tm
         core.set_parameters({"damping": 0.1 * i, "rerun_path": str(tmp_path / f"w{i}.rrd")})
         core.tick()
     threads = native_threads()
-    for i in range(40):
+    for i in range(12):                     # a leak of one thread in four changes shows
         core.set_parameters({"damping": 0.5 + 0.1 * (i % 2)})
         core.set_parameters({"friction.coulomb": [0.1, 0.1] if i % 2 else None})
         core.set_parameters({"rerun_path": str(tmp_path / f"arm{i + 1}.rrd")})
@@ -308,7 +308,7 @@ def test_a_recording_node_keeps_its_threads_across_live_changes_and_new_files(tm
     assert native_threads() <= threads + 2    # rerun once leaked 4 a change (rerun#2116)
     core.finish()
     # every file the node left is closed and reads back, the scene's rows in it
-    for i in (1, 20, 40):
+    for i in (1, 6, 12):
         paths = {chunk.entity_path for chunk in RrdReader(str(tmp_path / f"arm{i}.rrd")).stream()}
         assert "/joints/angle" in paths
 
@@ -347,14 +347,25 @@ SHOWN_CHANGES = {
 }
 
 
+def index_entries(path, static_only=False) -> int:
+    """What rerun keeps an index entry for until the file closes, counted the same however
+    loaded the machine: each chunk the recorder sends whole (send_columns), and each static
+    log, one row each. Rerun's batcher groups static logs into chunks by wall time (every
+    few ms, on its own thread), so their chunk count varies with load: counted, it made
+    these tests fail under load (72 static chunks against 49 + 5 for the same logs)."""
+    from rerun.chunk import RrdReader
+
+    return sum(chunk.to_record_batch().num_rows if chunk.is_static else 1
+               for chunk in RrdReader(str(path)).stream()
+               if chunk.is_static or not static_only)
+
+
 @pytest.mark.parametrize("change", SHOWN_CHANGES)
 def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatch, change):
     """Rows before and after such a change read with their own snapshot, but go in the same
     batch, one chunk per entity: rerun keeps an index entry per chunk (and per static log)
     until the file closes, so 30 changes must not cost more chunks than 2; the static data
     (styles, the scene as data) is logged once a send, from the latest setup."""
-    from rerun.chunk import RrdReader
-
     from arm_sim_ros.recording.rrd import telemetry
 
     monkeypatch.setattr(telemetry, "FILE_PERIOD", 1e9)   # one send: when the file closes
@@ -368,7 +379,7 @@ def test_changes_a_recording_shows_add_no_chunks_per_change(tmp_path, monkeypatc
                 SHOWN_CHANGES[change](core, i)
             core.tick()
         core.finish()
-        return sum(1 for _ in RrdReader(str(path)).stream())
+        return index_entries(path)
 
     few, many = chunks(2), chunks(30)
     assert many <= few + 2                     # before: ~25 more per change
@@ -379,8 +390,6 @@ def test_changes_at_every_send_log_the_static_data_once_a_period(tmp_path, monke
     """A send at every tick and such a change before each (a restart's new E(0) is in a
     pane's title): the blueprint, styles and properties go at the first send and when the
     file closes, not ~70 entries a send (rerun keeps each until the file closes)."""
-    from rerun.chunk import RrdReader
-
     from arm_sim_ros.recording.rrd import static_data, telemetry
 
     monkeypatch.setattr(telemetry, "FILE_PERIOD", 0.0)          # a send at every tick
@@ -394,10 +403,10 @@ def test_changes_at_every_send_log_the_static_data_once_a_period(tmp_path, monke
                 SHOWN_CHANGES[change](core, i)
             core.tick()
         core.finish()
-        return sum(1 for chunk in RrdReader(str(path)).stream() if chunk.is_static)
+        return index_entries(path, static_only=True)
 
     few, many = static_chunks(2), static_chunks(30)
-    assert many <= few + 5                     # before: the static data again every send
+    assert many == few                         # before: the static data again every send
 
 
 def test_a_recording_draws_an_absurd_accepted_value_without_a_python_warning(tmp_path, recwarn):

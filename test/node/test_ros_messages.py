@@ -39,7 +39,7 @@ doubles = st.lists(st.floats(allow_nan=False, width=64), max_size=4)
 names = st.lists(st.text(max_size=12), max_size=4)
 
 
-@settings(max_examples=150, deadline=None, derandomize=True)
+@settings(max_examples=50, deadline=None, derandomize=True)   # 150 took 14 s loaded
 @given(sec=st.integers(-2**31, 2**31 - 1), nanosec=st.integers(0, 2**32 - 1),
        frame_id=st.text(max_size=9), name=names, position=doubles, velocity=doubles,
        effort=doubles)

@@ -69,7 +69,7 @@ def test_step_simulation_lockstep_and_pauses_leave_the_stream_as_it_was():
     stepped, locked, paused = make_core(), make_core(lockstep=True), make_core()
     got = {"stepped": [], "locked": [], "paused": []}
     for k in range(40):
-        got["stepped"] += stepped.step_ticks(1)                # StepSimulation, one by one
+        got["stepped"].append(stepped.step_tick())             # StepSimulation, one by one
         locked.on_command([0.0, 0.0])                          # each command ticks once
         got["locked"] += locked.take_lockstep_states()
         paused.paused = k % 3 == 0                             # paused ticks: time stands still

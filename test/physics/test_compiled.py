@@ -95,7 +95,8 @@ def test_a_smooth_run_is_one_compiled_call_until_something_is_to_be_said(monkeyp
     monkeypatch.setattr(sim, "step_in_python", lambda: taken.append(sim.steps))
     sim.run(3.0)
     assert taken == [] and sim.steps == 300 and sim.state is sim._sound
-    assert not [e for e in sim.events if e.kind in ("substepping", "substeps", "accuracy", "fault")]
+    assert not [e for e in sim.events if e.kind in ("substepping", "substeps", "accuracy",
+                                                    "unpredictable", "fault")]
 
 
 def test_a_step_that_misses_the_tolerance_is_taken_again_in_the_compiled_loop(monkeypatch):
@@ -153,7 +154,7 @@ def fuzz(examples: int):
                                            HealthCheck.function_scoped_fixture])
 
 
-@fuzz(25)
+@fuzz(8)      # ARM_SIM_FUZZ_EXAMPLES=200 for a hunt
 @given(case=smooth_runs())
 def test_random_smooth_runs_leave_the_books_as_python_leaves_them(case, monkeypatch):
     scene, commands = case

@@ -65,6 +65,7 @@ def switching_scenes(draw):
     return scene, commands, (0.15, 0.1) if slow else (0.6, 0.4)
 
 
+@pytest.mark.hunt
 @FUZZ
 @given(case=switching_scenes())
 def test_random_switching_scenes_run_compiled_as_in_python_bit_for_bit(case, monkeypatch):
@@ -143,6 +144,7 @@ def both_checks(name, y0, y1, dt):
     return near(y0, y1, dt, K, np.zeros(8)), python, bool(restepped)
 
 
+@pytest.mark.hunt
 @FUZZ
 @given(name=st.sampled_from(sorted(MODES)), dt=st.sampled_from([1e-3, 1e-2]),
        q0=st.tuples(st.floats(-2.05, 2.05), st.floats(-2.05, 2.05)),

@@ -121,6 +121,7 @@ def hard_limit_scenes(draw):
                  friction=friction)
 
 
+@pytest.mark.hunt
 @FUZZ
 @given(scene=hard_limit_scenes())
 def test_no_hard_limit_is_passed_and_every_sound_run_closes_its_books(scene):
@@ -142,6 +143,7 @@ def friction_scenes(draw):
                            "stribeck_velocity": draw(st.sampled_from([0.0, 0.1, 1.0]))})
 
 
+@pytest.mark.hunt
 @FUZZ
 @given(scene=friction_scenes())
 def test_every_stop_large_coulomb_friction_makes_is_located_as_the_reference_has_it(scene):
@@ -170,6 +172,7 @@ def compliant_scenes(draw):
                                "damping": draw(st.floats(0.0, 10.0))})
 
 
+@pytest.mark.hunt
 @FUZZ
 @given(scene=compliant_scenes())
 def test_compliant_limits_enter_and_leave_as_the_reference_does(scene):

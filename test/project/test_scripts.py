@@ -5,6 +5,7 @@ otherwise hands over to the real one) shows when pip would run without touching 
 a decoy arm_sim_node first on PATH shows that nothing from elsewhere is ever executed.
 """
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -60,22 +61,48 @@ def run(command, env, timeout=60):
     return subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout)
 
 
-def test_with_ros_sourced_and_a_decoy_on_path_run_starts_this_checkouts_node(tmp_path):
-    venv = fake_venv(tmp_path / "venv")
-    env = dict(os.environ, ROS_DISTRO="jazzy", ARM_SIM_VENV=str(venv),
-               PATH=decoy_path(tmp_path / "elsewhere"), ROS_DOMAIN_ID=DOMAIN_ID,
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+def node_env(venv: Path, **more) -> dict:
+    env = dict(os.environ, ARM_SIM_VENV=str(venv), ROS_DOMAIN_ID=DOMAIN_ID,
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", **more)
     env.pop("PYTHONPATH", None)   # no rclpy can import: the venv's node on dds
+    return env
+
+
+def test_with_ros_sourced_and_a_decoy_on_path_run_starts_this_checkouts_node(tmp_path):
+    checkout = copy_of_checkout(tmp_path)
+    venv = fake_venv(tmp_path / "venv")
+    env = node_env(venv, ROS_DISTRO="jazzy", PATH=decoy_path(tmp_path / "elsewhere"))
     recording = tmp_path / "run.rrd"
-    done = run([str(ROOT / "scripts/run"), "--duration", "0.3", "--quiet",
+    done = run([str(checkout / "scripts/run"), "--duration", "0.3", "--quiet",
                 "--ros-args", "-p", f"rerun_path:={recording}"], env)
     assert done.returncode == 0, done.stderr
+    assert not (checkout / "runs").exists()        # a recording named by the user: theirs alone
     assert not (tmp_path / "elsewhere" / "DECOY_RAN").exists()
     named = [line for line in done.stderr.splitlines() if line.startswith("scripts/run:")]
     assert named == [f"scripts/run: node {venv}/bin/arm_sim_node (venv {venv}, this checkout "
                      "installed editable), transport dds"]
     assert "scene release started" in done.stderr
     assert recording.stat().st_size > 0
+
+
+def test_run_can_be_run_again_and_again_each_run_a_recording_of_its_own(tmp_path):
+    """The README's headline command, three times in one checkout: each writes a new
+    runs/arm_sim_<date>_<time>.rrd (a second one in the same second gets _2) and names it."""
+    checkout = copy_of_checkout(tmp_path)
+    env = node_env(fake_venv(tmp_path / "venv"))
+    env.pop("ROS_DISTRO", None)
+    named = []
+    for _ in range(3):
+        done = run([str(checkout / "scripts/run"), "--duration", "0.05", "--quiet"], env)
+        assert done.returncode == 0, done.stderr
+        started = [line for line in done.stderr.splitlines() if "started" in line]
+        assert len(started) == 1 and "; recording runs/arm_sim_" in started[0], done.stderr
+        named.append(started[0].split("; recording ")[1])
+    assert len(set(named)) == 3
+    assert sorted(p.relative_to(checkout).as_posix() for p in (checkout / "runs").iterdir()) \
+        == sorted(named)
+    assert all(re.fullmatch(r"runs/arm_sim_\d{4}-\d\d-\d\d_\d\d-\d\d-\d\d(_\d+)?\.rrd", name)
+               and (checkout / name).stat().st_size > 0 for name in named)
 
 
 def test_a_colcon_overlay_of_this_checkout_runs_when_ros_is_sourced(tmp_path):
@@ -180,7 +207,8 @@ def test_a_failed_first_install_says_why_and_is_not_127(tmp_path, script):
     checkout = copy_of_checkout(tmp_path)
     venv = tmp_path / "venv"
     (venv / "bin").mkdir(parents=True)
-    (venv / "bin/python").write_text("#!/bin/sh\nexit 1\n")   # pip fails: offline
+    (venv / "bin/python").write_text(   # pip fails (offline); anything else is the real one
+        f'#!/bin/sh\n[ "$1" = "-m" ] && exit 1\nexec "{sys.executable}" "$@"\n')
     (venv / "bin/python").chmod(0o755)
     env = dict(os.environ, ARM_SIM_VENV=str(venv))
     env.pop("ROS_DISTRO", None)
@@ -188,3 +216,96 @@ def test_a_failed_first_install_says_why_and_is_not_127(tmp_path, script):
     assert done.returncode == 1
     assert "pip could not install" in done.stderr
     assert not list(venv.glob(".arm_sim_ros-installed*"))
+
+
+def old_python(path: Path, version: str = "3.10") -> Path:
+    """A python that says it is `version` and leaves a mark if asked to make a venv or pip."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f'#!/bin/sh\n[ "$1" = "-c" ] && {{ echo {version}; exit 0; }}\n'
+                    f'touch "{path.parent}/USED_FOR_$2"\nexit 1\n')
+    path.chmod(0o755)
+    return path
+
+
+@pytest.mark.parametrize("script", ["run", "test"])
+def test_an_older_python3_is_refused_in_one_line_before_any_venv_or_pip(tmp_path, script):
+    checkout = copy_of_checkout(tmp_path)
+    python = old_python(tmp_path / "bin/python3")
+    env = dict(os.environ, PATH=f"{python.parent}:{os.environ['PATH']}",
+               ARM_SIM_VENV=str(tmp_path / "venv"))
+    env.pop("ROS_DISTRO", None)
+    env.pop("ARM_SIM_PYTHON", None)
+    done = run([str(checkout / "scripts" / script)], env)
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [
+        "scripts: error: python3 is Python 3.10; arm_sim_ros needs 3.11 or newer (its pinned "
+        "numpy and scipy do): install Python 3.11 or newer and run again with "
+        "ARM_SIM_PYTHON=python3.11"]
+    assert not (tmp_path / "venv").exists() and not list(python.parent.glob("USED_FOR_*"))
+
+
+def test_arm_sim_python_chooses_the_python_that_makes_the_venv(tmp_path):
+    checkout = copy_of_checkout(tmp_path)
+    old_python(tmp_path / "bin/python3")
+    env = dict(os.environ, PATH=f"{tmp_path / 'bin'}:{os.environ['PATH']}",
+               ARM_SIM_VENV=str(tmp_path / "venv"), ARM_SIM_PYTHON=str(fake_python(tmp_path)))
+    env.pop("ROS_DISTRO", None)
+    done = run([str(checkout / "scripts/test"), "--version"], env)
+    assert f"creating the venv {tmp_path / 'venv'} with {env['ARM_SIM_PYTHON']}" in done.stderr
+    assert (tmp_path / "made-venv").read_text().split() == ["-m", "venv", str(tmp_path / "venv")]
+
+
+def fake_python(tmp_path: Path) -> Path:
+    """A current python whose `-m venv DIR` makes DIR a fake venv (fake_venv) and notes it."""
+    path = tmp_path / "good/python"
+    path.parent.mkdir()
+    path.write_text(
+        "#!/bin/sh\n"
+        f'if [ "$1" = "-m" ] && [ "$2" = "venv" ]; then echo "$@" > "{tmp_path}/made-venv"; '
+        f'exec "{sys.executable}" -c "import sys; sys.path.insert(0, \'{Path(__file__).parent}\'); '
+        'from test_scripts import fake_venv; from pathlib import Path; '
+        'fake_venv(Path(sys.argv[1]))" "$3"; fi\n'
+        f'exec "{sys.executable}" "$@"\n')
+    path.chmod(0o755)
+    return path
+
+
+def test_a_venv_of_an_older_python_is_refused_in_one_line_before_pip(tmp_path):
+    checkout = copy_of_checkout(tmp_path)
+    venv = tmp_path / "venv"
+    old_python(venv / "bin/python")
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    env.pop("ROS_DISTRO", None)
+    done = run([str(checkout / "scripts/run")], env)
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [
+        f"scripts: error: the venv {venv} is Python 3.10; arm_sim_ros needs 3.11 or newer (its "
+        "pinned numpy and scipy do): remove it and run again with ARM_SIM_PYTHON=python3.11 "
+        "(or newer)"]
+    assert not list(venv.glob("bin/USED_FOR_*"))
+
+
+def test_the_python_requirement_is_said_once_and_every_pinned_dependency_meets_it():
+    """setup.py's python_requires is what the README and package.xml say, and no pinned
+    dependency installed here asks for a newer Python (numpy 2.4 and scipy 1.17 need 3.11)."""
+    from importlib import metadata
+    from packaging.requirements import Requirement
+    from packaging.specifiers import SpecifierSet
+
+    need = re.search(r'python_requires=">=([\d.]+)"', (ROOT / "setup.py").read_text())[1]
+    assert f"Python {need} or newer" in (ROOT / "README.md").read_text()
+    assert (f'<exec_depend version_gte="{need}">python3</exec_depend>'
+            in (ROOT / "package.xml").read_text())
+    major, minor = map(int, need.split("."))
+    checked, older = {}, f"{major}.{minor - 1}.0"     # and none lower would be true
+    for line in metadata.requires("arm_sim_ros"):
+        requirement = Requirement(line)
+        try:
+            installed = metadata.distribution(requirement.name)
+        except metadata.PackageNotFoundError:   # an extra not installed here (fast)
+            continue
+        if installed.version in requirement.specifier:
+            floor = SpecifierSet(installed.metadata.get("Requires-Python") or "")
+            checked[requirement.name] = (floor.contains(f"{need}.0"), floor.contains(older))
+    assert checked["numpy"] == checked["scipy"] == (True, False)
+    assert [name for name, (ok, _) in checked.items() if not ok] == []

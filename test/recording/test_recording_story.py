@@ -186,7 +186,7 @@ def test_the_node_records_refused_commands_substeps_and_commanded_vs_applied_per
     names = {r.get("ViewBlueprint:display_name", [None])[0]
              for r in blueprint_rows(path).values()}
     assert {"Refused commands / tick", "Real-time factor", "Late ticks", "Sub-steps / tick",
-            "Joint torque commanded vs applied (N m)"} <= names
+            "Torque & command (N m)"} <= names
 
 
 def test_the_links_tick_story_has_real_time_factor_and_late_ticks(tmp_path):

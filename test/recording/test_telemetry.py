@@ -289,8 +289,8 @@ def test_blueprint_is_saved_paused_on_simulated_time(tmp_path):
     record(load_scene("release"), tmp_path / "release.rrd")
     rows = blueprint_rows(tmp_path / "release.rrd")
     names = {r.get("ViewBlueprint:display_name", [None])[0] for r in rows.values()}
-    assert {"Energy E (J)", "Events", "Effects the scene calls for", "Joint angle (rad)",
-            "Joint velocity (rad/s)"} <= names
+    assert {"Energy E = kinetic + gravity (J)", "Events", "Effects the scene calls for",
+            "Joint angle (rad)", "Joint velocity (rad/s)"} <= names
     assert any(name.startswith("Arm") for name in names if name)
     assert any(name.startswith("Where did the energy go?") and "(J)" in name
                for name in names if name)

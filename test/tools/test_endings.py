@@ -199,7 +199,7 @@ def test_a_killed_run_bag_opens_and_holds_a_gapless_run(tmp_path):
     path = tmp_path / "bag"
     process = start_cli("run", "--duration", "10000", "--bag", path)
     try:
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 120   # a hang guard: a loaded machine is slow
         while not ((path / "metadata.yaml").exists() and metadata(path)["message_count"] > 5000):
             assert time.monotonic() < deadline
             time.sleep(0.05)
@@ -295,13 +295,13 @@ def test_an_empty_bag_starts_when_it_was_opened(tmp_path):
     assert bag_messages(tmp_path / "bag") == []
 
 
-def test_an_empty_recording_starts_when_the_recording_did(tmp_path, monkeypatch):
+def test_a_recording_that_waited_in_vain_leaves_no_bag(tmp_path, monkeypatch, capsys):
+    """It left an empty bag (exit 0), whose name the next try could not use."""
     for name, value in dds_env(84).items():
         monkeypatch.setenv(name, value)
-    before = time.time_ns()
-    assert cli.main(["record", "--duration", "0.3", str(tmp_path / "bag")]) == 0
-    start = metadata(tmp_path / "bag")["starting_time"]["nanoseconds_since_epoch"]
-    assert before <= start <= time.time_ns()
+    assert cli.main(["record", "--duration", "0.3", "--wait", "0.5", str(tmp_path / "bag")]) == 1
+    assert capsys.readouterr().err.splitlines()[-1].startswith("record: no message arrived on ")
+    assert not (tmp_path / "bag").exists()
 
 
 def test_the_last_diagnostics_of_a_run_say_how_it_ended(capsys, tmp_path):

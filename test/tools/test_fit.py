@@ -81,8 +81,9 @@ def assert_recovered(outcome, keys):
     assert all(0.8 < m < 1.25 for m in validation), validation     # at the noise level
 
 
-@pytest.mark.parametrize("key", ["damping", "friction.coulomb", "motors.rotor_inertia",
-                                 "payload.mass"])
+# Each a long identification (10-20 s of CPU): one in the default run, all under `hunt`.
+@pytest.mark.parametrize("key", [pytest.param(key, marks=pytest.mark.hunt) for key in (
+    "damping", "friction.coulomb", "motors.rotor_inertia")] + ["payload.mass"])
 def test_each_parameter_alone_is_recovered(capsys, bag, key):
     outcome = fit(capsys, bag, *base_args(**{key.replace(".", "__"): WRONG[key]}),
                   "--free", key, "--starts", "1", "--workers", "1")
@@ -90,6 +91,7 @@ def test_each_parameter_alone_is_recovered(capsys, bag, key):
     assert outcome["converged"] and outcome["warnings"] == []
 
 
+@pytest.mark.hunt
 def test_four_keys_together_are_recovered(capsys, bag, tmp_path):
     moved = {k.replace(".", "__"): v for k, v in WRONG.items()}
     fitted = tmp_path / "fitted.yaml"
@@ -120,6 +122,7 @@ def test_a_joint_that_never_stuck_makes_its_breakaway_friction_unidentifiable(ca
     assert outcome["parameters"][1]["value"] == pytest.approx(0.4, rel=0.05)
 
 
+@pytest.mark.hunt
 def test_starts_on_local_processes_and_on_a_dask_cluster_give_the_same_fit(capsys, short_bag):
     distributed = pytest.importorskip("distributed")
     args = [short_bag, *base_args(payload__mass="1.0"), "--free", "payload.mass", "--starts", "2",
@@ -221,6 +224,7 @@ def test_a_sqlite3_bag_and_a_csv_read_as_the_mcap_bag_does(tmp_path, short_bag):
         assert np.allclose(other.t, rec.t, atol=1e-9)
 
 
+@pytest.mark.hunt
 def test_several_recordings_are_fitted_alone_in_parallel_then_together(capsys, short_bag,
                                                                          tmp_path):
     other = write_bag(tmp_path / "other", recording(1.0, seed=11)[0])

@@ -18,6 +18,8 @@ from arm_sim_ros.physics.scene import FIELD_KINDS
 from arm_sim_ros.tools import cli
 from arm_sim_ros.usage import UsageError
 
+pytestmark = pytest.mark.hunt   # every case here is a fuzz (scripts/test -m hunt)
+
 # ARM_SIM_FUZZ_EXAMPLES=5000 for a longer hunt by hand; CI keeps to a minute.
 FUZZ = settings(max_examples=int(os.environ.get("ARM_SIM_FUZZ_EXAMPLES", 150)), deadline=None,
                 derandomize=not os.environ.get("ARM_SIM_FUZZ_EXAMPLES"),

@@ -150,7 +150,7 @@ def test_clock_origin_is_checked_and_start_only():
 
 def test_the_node_stops_on_sigint_even_when_started_with_sigint_ignored(tmp_path):
     """`cmd &` in a script starts it with SIGINT ignored; Python would keep it ignored."""
-    env = dict(os.environ, ROS_DOMAIN_ID="202", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(os.environ, ROS_DOMAIN_ID="208", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     node = subprocess.Popen([str(BIN / "arm_sim_node"), "--transport", "dds", "--quiet"],
                             env=env, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))

@@ -15,6 +15,7 @@ from ...physics.model import ParameterError, brief
 from ...physics.scene import (FIELD_KINDS, MAPPINGS, UNNAMED, Scene, SceneError,
                               load_scene)
 from .recording_targets import rerun_path_problem, viewer_address_problem
+from ...usage import did_you_mean, one_line
 from .values import ParameterRefused, coerce
 
 MAX_STEPS_PER_TICK = 100_000      # beyond this one tick would freeze the node for seconds
@@ -251,7 +252,8 @@ def check_recording(values: dict, names=RECORDING) -> None:
 def _check_known(names) -> None:
     unknown = sorted(set(names) - set(SPECS))
     if unknown:
-        raise ParameterRefused(unknown[0], f"unknown parameter; known: {', '.join(SPECS)}")
+        raise ParameterRefused(unknown[0], f"unknown parameter; {did_you_mean(unknown[0], SPECS)}"
+                                           f"known: {', '.join(SPECS)}")
 
 
 def scene_defaults(scene_name: str, robot_description: str = "") -> dict:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import isfinite
 
+from ...usage import did_you_mean
 from ..model import ParameterError, brief
 
 REQUIRED = object()
@@ -88,7 +89,8 @@ def validate(effect: str, parameters, mapping) -> dict:
     known = {p.name: p for p in parameters}
     unknown = sorted(set(map(str, mapping)) - set(known))
     if unknown:
-        raise ParameterError(f"{effect}.{unknown[0]} is not a key of {effect}; its keys: "
+        hint = did_you_mean(f"{effect}.{unknown[0]}", [f"{effect}.{k}" for k in known])
+        raise ParameterError(f"{effect}.{unknown[0]} is not a key of {effect}; {hint}its keys: "
                              f"{', '.join(known)}")
     values = {}
     for name, parameter in known.items():

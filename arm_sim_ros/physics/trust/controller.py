@@ -69,7 +69,7 @@ def said_count(books, wanted, first, h, reached=None, where="") -> None:
                    f"at the cap of {books.cap} sub-steps per step (max_substeps); the run "
                    "goes on at the cap")
     elif wanted > books.most and wanted > 2 * max(1, books.most):
-        books.most = wanted                   # the tolerance met by more sub-steps: routine
+        books.most = wanted     # the tolerance at work, as it is built to: "substeps", info
         books.emit("substeps", f"local error {first / h:.3g} per s (scaled) for "
                    f"tolerance {books.tolerance:g} (aiming at half): each {h:g} s "
                    f"step{where} is taken as {wanted} sub-steps")
@@ -88,9 +88,19 @@ def said_unreachable(books, scaled, n, h) -> None:
 
 
 def said_lost(books, index: int, h: float) -> None:
-    """The shadow lost the motion in step `index` (or before): said once, when it is."""
+    """The shadow lost the motion in step `index` (or before): said once, when it is. Where
+    every step met the tolerance the errors grew by the motion itself (chaos, as a double
+    pendulum's): said in plain words as "unpredictable", information, not a fault; with
+    no tolerance, or one not met at the cap, it is an "accuracy" warning."""
     if books.shadow.lost and not books.said_lost and books.emit is not None:
         books.said_lost = True
-        books.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = "
-                   f"{(index + 1) * h:.6g} s: the run no longer follows the true motion (a "
-                   "step too coarse for it, or chaos); the estimate stops at that bound")
+        at = f"{(index + 1) * h:.6g}"
+        if books.tolerance and not books.capped:
+            books.emit("unpredictable", f"past t = {at} s this motion is unpredictable: it "
+                       "is chaotic, and errors far below the tolerance at each step have grown "
+                       f"past {LOST:g} rad; the run goes on, but no longer follows the true "
+                       "motion (the error estimate stops at that bound)")
+            return
+        books.emit("accuracy", f"the global error estimate passed {LOST:g} rad by t = {at} s: "
+                   "the run no longer follows the true motion (a step too coarse for it, or "
+                   "chaos); the estimate stops at that bound")

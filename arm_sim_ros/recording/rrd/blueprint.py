@@ -13,7 +13,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ...physics.effects import EffortLimits
-from ...physics.scene import MAPPINGS
+from ...physics.scene import MAPPINGS, load_scene, preset_names
+from ...physics.urdf.read import changed_values
 from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, MEASURED, SUBSTEPS,
                         accuracy_paths, channel_path, extra_paths, stored_path)
 
@@ -55,6 +56,9 @@ JOINT_SERIES = {  # path: (title, series names)
     "joints/current": ("winding current (A)", ("i1 shoulder", "i2 elbow")),
 }
 JOINT_COLORS = ((80, 220, 235), (255, 205, 70))      # shoulder cyan, elbow amber
+# Small panes carry no legend (it covered their curves): a joint's series are drawn in its
+# link's colour (the arm's view says which), a command darker; hovering a curve names it.
+NO_LEGEND = rrb.PlotLegend(visible=False)
 COMMANDED_SERIES = ("τ1 commanded", "τ2 commanded")
 COMMANDED_COLORS = ((40, 130, 255), (255, 110, 40))  # beside the applied torque's cyan, amber
 # With sensors the readings are drawn narrow over the truth, which is drawn wide beneath.
@@ -182,18 +186,19 @@ def reach(arm) -> float:
 
 def torque_view(snap, path: str) -> rrb.TimeSeriesView:
     """A joint's view; with commands, the torque view shows the commanded beside the applied."""
-    if path == "joints/torque" and snap.commanded:
-        return rrb.TimeSeriesView(name="Joint torque commanded vs applied (N m)",
-                                  contents=[path, COMMANDED])
+    if path == "joints/torque" and snap.commanded:   # short: four such panes share a row
+        return rrb.TimeSeriesView(name="Torque & command (N m)", contents=[path, COMMANDED],
+                                  plot_legend=NO_LEGEND)
     if snap.measured and path in MEASURED:     # the readings drawn over the truth
         return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}: measured over true",
                                   contents=[path, MEASURED[path]])
-    return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}", origin=path)
+    return rrb.TimeSeriesView(name=f"Joint {joint_series(path)[0]}", origin=path,
+                              plot_legend=NO_LEGEND)
 
 
 def node_views() -> list:
     """The node's story: one small view per per-tick series."""
-    return [rrb.TimeSeriesView(name=title, origin=path, plot_legend=rrb.PlotLegend(visible=False))
+    return [rrb.TimeSeriesView(name=title, origin=path, plot_legend=NO_LEGEND)
             for path, (title, _, _, _) in NODE_SERIES.items()]
 
 
@@ -203,7 +208,7 @@ def arm3d_view(arm) -> rrb.Spatial3DView:
     arrows along the joint axes show."""
     extent = reach(arm)
     return rrb.Spatial3DView(
-        name="Arm in 3D (URDF): COMs, torques along the axes, g", origin="arm3d",
+        name="Arm in 3D (URDF)", origin="arm3d",      # COMs, torques along the axes, g
         eye_controls=rrb.EyeControls3D(position=(0.6 * extent, -1.35 * extent, 0.4 * extent),
                                        look_target=(0.0, 0.0, 0.0),
                                        eye_up=(0.0, 0.0, 1.0)))
@@ -218,10 +223,10 @@ def trust_view(snap) -> rrb.Vertical:
     each step's local error estimate and their sum (rad, rad/s; the tolerance in the title:
     it is a scaled error per second, in no unit the estimate has), what holding them cost
     (sub-steps per step) and what the simulator did (events). Each pane scales to its own
-    series: J and rad apart, a step's error apart from the sum of thousands. The legends
-    here name each series with its unit (the entities' own names leave the unit to their
-    `unit`, which `arm-sim inspect` appends)."""
-    legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
+    series: J and rad apart, a step's error apart from the sum of thousands. No legends: a
+    pane holds one series, which its title names with its unit (as its name does, on hover;
+    the entities' own names leave it to their `unit`, which `arm-sim inspect` appends)."""
+    legend = NO_LEGEND
 
     def pane(title, named):
         return rrb.TimeSeriesView(
@@ -258,17 +263,17 @@ def blueprint(snap, live: bool, node: bool = False) -> rrb.Blueprint:
     # The arm is stored y up, as the physics has it; FLIP (logged at "arm") turns it for
     # the 2D view, whose y axis points down, so the bounds are in the viewer's frame.
     arm_view = rrb.Spatial2DView(
-        name="Arm (y up, V = 0 on the grey line)", origin="/", contents=["+ arm/**"],
+        name="Arm (y up): shoulder cyan, elbow amber", origin="/", contents=["+ arm/**"],
         visual_bounds=rrb.VisualBounds2D(x_range=[-extent, extent], y_range=[-extent, extent]),
         overrides={"arm/tip_trace": trace_range})
     legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
     books = rrb.TimeSeriesView(
         name="Where did the energy go? Books since t = 0 (J): stored + losses = inputs",
         contents=books_paths(snap), plot_legend=legend)
-    levels = rrb.TimeSeriesView(
-        name="Energy E (J)", plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftBottom),
-        contents=[TOTAL] + [channel_path(n, k) for n, k in snap.kinds.items()
-                            if k == "transfer"])
+    transfers = [channel_path(n, k) for n, k in snap.kinds.items() if k == "transfer"]
+    levels = rrb.TimeSeriesView(   # one series: its title names it, no legend over it
+        name=f"Energy E = {' + '.join(snap.parts)} (J)", contents=[TOTAL] + transfers,
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop) if transfers else NO_LEGEND)
     if snap.arm3d is not None:
         arm_view = rrb.Horizontal(arm_view, arm3d_view(snap.arm))
     joints = [torque_view(snap, p) for p in joint_paths(snap)]
@@ -328,10 +333,21 @@ def effect_rows(snap, effect) -> list[tuple[str, str, str]]:
     return []
 
 
+def changed_from_preset(scene) -> list:
+    """`key old -> new` for what a run changed in the preset its scene is named after (its
+    description was written for the preset); none for a scene of its own."""
+    if scene.name not in preset_names():
+        return []
+    return [change for change in changed_values(load_scene(scene.name), scene)
+            if not change.startswith(("description ", "duration "))]
+
+
 def effects_document(snap) -> str:
     """The effects the scene called for, with their parameters in units, and its books."""
     scene = snap.scene
     about = f": {scene.description}" if scene.description else ""
+    if changed := changed_from_preset(scene):   # the preset's words may no longer hold
+        about += f" (changed from the preset: {'; '.join(changed)})"
     lines = [f"**{scene.name}**{about} ({scene.method}, h = {scene.step_size:g} s)", "",
              "| effect | parameter | value | unit |", "|---|---|---|---|"]
     for effect in snap.effects:

@@ -41,7 +41,7 @@ import rerun as rr
 
 from .arm3d import arm3d_for
 from .blueprint import blueprint
-from ...physics.simulator import ROUTINE, recorded_row
+from ...physics.simulator import recorded_row
 from ..readouts import Snapshot, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks
 from .static_data import StaticData
@@ -174,8 +174,7 @@ class RerunRecorder:
 
     def _on_sim_event(self, event) -> None:
         """At the step it came in (event.t: its start), though its states come later."""
-        level = "error" if event.kind == "fault" else "info" if event.kind in ROUTINE else "warn"
-        self.event(f"{event.kind}: {event.message}", level,
+        self.event(f"{event.kind}: {event.message}", event.level,
                    round(event.t / self.sim.step_size) + 1 - self._next)
 
     def event(self, text: str, level: str = "info", ahead: int = 0) -> None:

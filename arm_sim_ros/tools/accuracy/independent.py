@@ -14,7 +14,6 @@ from __future__ import annotations
 from math import cos, exp, inf, sin
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 TOLERANCE = 1e-12
 REST_SPEED = 1e-4          # a bounce slower than this ends at rest (the documented rule)
@@ -237,6 +236,8 @@ class Independent:
 
     def states(self, times) -> list[tuple]:
         """(q1, q2, q̇1, q̇2) at `times` (ascending, from 0)."""
+        from scipy.integrate import solve_ivp   # here: arm-sim starts without scipy (0.6 s)
+
         x = np.array([*self.scene.initial_positions, *self.scene.initial_velocities], float)
         mode, zone = self.initial(x)
         t, out, k = 0.0, [], 0

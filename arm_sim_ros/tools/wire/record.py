@@ -8,13 +8,15 @@ that bag time is when the publisher sent each message (its DDS source timestamp)
 than when it arrived: on one machine the two differ by the ~0.3 ms transport latency, and
 the send time keeps the publishing cadence that `ros2 bag play` reproduces. Messages keep
 their own header stamps; each topic carries the QoS its publishers offered, as discovery
-reports it. The recording stops at Ctrl-C, SIGTERM, SIGHUP or --duration within about two
-seconds even under a flood (a second signal stops at once), drains the readers and closes
-the bag, so every message received is kept. Each reader is reliable and keeps the last
+reports it. The recording stops at Ctrl-C, SIGTERM, SIGHUP or --duration (counted from
+the first message: a recorder started before its node waits --wait for it) within about
+two seconds even under a flood (a second signal stops at once), drains the readers and
+closes the bag, so every message received is kept. Each reader is reliable and keeps the last
 READER_DEPTH samples not yet written (as `ros2 bag record` keeps a keep-last queue): memory
 stays bounded, and a publisher that outpaces the disk for longer loses its oldest
 unwritten samples rather than delaying a stop. Every REPORT_SECONDS a line on stderr gives
-the count per topic, or says that no publisher has been seen yet.
+the count per topic, or says that no publisher has been seen yet. A recording that received
+nothing leaves no bag and exits 1.
 
 The bag opens at every moment (recording.bag): a kill -9 loses at most the last
 CHUNK_SECONDS of messages; a full disk or file-size limit closes it with what fit.
@@ -22,7 +24,8 @@ CHUNK_SECONDS of messages; a full disk or file-size limit closes it with what fi
 from __future__ import annotations
 
 import time
-from ...interface import SENSOR_TOPICS
+
+from ...interface import KNOWN_TOPICS, SENSOR_TOPICS, wrong_type
 from ...usage import UsageError
 from ..signals import StopOnSignals
 
@@ -37,6 +40,7 @@ READER_DEPTH = 1000  # samples a reader keeps before it drops its oldest (keep-l
 QUIET_SECONDS = 0.1  # after a stop: no data for this long means everything sent has arrived
 FLUSH_SECONDS = 1.5  # ... and this bounds the wait when publishers keep going
 REPORT_SECONDS = 3.0
+WAIT = 30.0        # with --duration: how long to wait for a first message (send-torque's too)
 
 
 def parse_topic(text: str) -> tuple[str, str]:
@@ -49,8 +53,12 @@ def parse_topic(text: str) -> tuple[str, str]:
     if not sep or not name.strip("/") or not matches:
         raise UsageError(f"--topics {text!r} must be NAME:TYPE with TYPE one of "
                          f"{', '.join(EXTRA_TYPES)} (or its last part, e.g. JointState)")
-    name = "/" + name.removeprefix("/")
-    return check_topic_name(name, f"--topics {text!r}: the name"), matches[0]
+    name = check_topic_name("/" + name.removeprefix("/"), f"--topics {text!r}: the name")
+    if problem := wrong_type(name, matches[0]):
+        fix = ("it is recorded by default" if name in DEFAULT_TOPICS else
+               f"--topics {name}:{KNOWN_TOPICS[name].rsplit('/', 1)[-1]}")
+        raise UsageError(f"--topics {text!r}: {problem} (the arm_sim node's topic); {fix}")
+    return name, matches[0]
 
 
 class TopicRecorder:
@@ -122,16 +130,23 @@ class TopicRecorder:
                         passed.add(name)
         return newest
 
-    def run(self, stop, duration: float | None = None, report=None) -> None:
-        """Record until `stop.requested` or `duration` wall seconds, then flush; `report`
-        (a function taking a line) hears the counts every REPORT_SECONDS."""
+    def run(self, stop, duration: float | None = None, report=None,
+            wait: float = WAIT) -> None:
+        """Record until `stop.requested` or `duration` wall seconds after the first message
+        (a recorder started before its node waits for it, with a duration at most `wait`
+        seconds), then flush; `report` (a function taking a line) hears the counts every
+        REPORT_SECONDS."""
         started = time.monotonic()
-        end = None if duration is None else started + duration
+        end = None
         next_report = started + REPORT_SECONDS
         while not stop.requested and (end is None or time.monotonic() < end):
+            if end is None and duration is not None and time.monotonic() - started > wait:
+                break                     # nothing came: the caller says so
             self.poll(POLL_SECONDS if end is None
                       else min(POLL_SECONDS, max(0.0, end - time.monotonic())), stop)
             self.writer.checkpoint()
+            if end is None and duration is not None and any(self.writer.counts.values()):
+                end = time.monotonic() + duration
             if report is not None and time.monotonic() >= next_report:
                 report(self.progress(time.monotonic() - started))
                 next_report += REPORT_SECONDS
@@ -200,15 +215,16 @@ def offer_from_dds(qos):
 
 
 def record(path, topics: dict[str, str], participant, duration: float | None = None,
-           stop=None, report=None) -> dict[str, int]:
-    """Record until `stop.requested` or `duration` wall seconds; returns messages per topic.
+           stop=None, report=None, wait: float = WAIT) -> dict[str, int]:
+    """Record until `stop.requested` or `duration` wall seconds after the first message;
+    returns messages per topic.
     The readers come first: a topic DDS refuses leaves no bag behind."""
     from ...recording.bags.bag import BagWriter
 
     recorder = TopicRecorder(participant, topics)
     with BagWriter(path, start_ns=time.time_ns()) as writer:
         recorder.writer = writer
-        recorder.run(stop or StopOnSignals(), duration, report)
+        recorder.run(stop or StopOnSignals(), duration, report, wait)
         return dict(writer.counts)
 
 
@@ -220,11 +236,13 @@ def cmd_record(args) -> int:
 
     from ...recording.bags.bag import BagError
     from ...node.wire.messages import make_participant
+    from ...outputs import clear_output
 
     topics = dict(DEFAULT_TOPICS)
     topics.update(parse_topic(t) for text in args.topics or [] for t in text.split(",") if t)
-    if args.duration is not None and not (isfinite(args.duration) and args.duration > 0):
-        raise BagError(f"--duration {args.duration} must be a positive number of seconds")
+    for name, value in (("--duration", args.duration), ("--wait", args.wait)):
+        if value is not None and not (isfinite(value) and value > 0):
+            raise BagError(f"{name} {value} must be a positive number of seconds")
     if Path(args.dir).exists():  # refused before joining the network
         raise BagError(f"{args.dir} exists already; a recording never overwrites one")
     participant = make_participant()   # a bad environment: DiscoveryError, one line
@@ -236,8 +254,14 @@ def cmd_record(args) -> int:
     # raises KeyboardInterrupt, and the bag is still closed.
     with StopOnSignals() as stop:
         report(f"recording {', '.join(topics)} into {args.dir} (Ctrl-C to stop)")
-        counts = record(args.dir, topics, participant, args.duration, stop, report)
-    summary = ", ".join(f"{topic} {n}" for topic, n in counts.items()) or "no messages"
+        counts = record(args.dir, topics, participant, args.duration, stop, report, args.wait)
+    if not any(counts.values()):     # an empty bag would only block the next try's name
+        clear_output(args.dir)
+        print(f"record: no message arrived on {', '.join(topics)}; no bag written. Is the "
+              "node running (and publishing while this records), with the same ROS_DOMAIN_ID "
+              "and ROS_AUTOMATIC_DISCOVERY_RANGE?", file=sys.stderr, flush=True)
+        return 1
+    summary = ", ".join(f"{topic} {n}" for topic, n in counts.items())
     print(f"wrote {args.dir}: {summary}", flush=True)
     return 0
 
@@ -249,5 +273,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--topics", action="append", metavar="NAME:TYPE[,NAME:TYPE...]",
                         help="more topics to record (repeatable, or comma-separated), e.g. "
                              "/target:JointState,/effort:std_msgs/msg/Float64MultiArray")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--duration", type=float,
+                        help="stop this many seconds after the first message (a node may "
+                             "start after the recorder)")
+    parser.add_argument("--wait", type=float, default=WAIT,
+                        help=f"with --duration: seconds to wait for a first message "
+                             f"(default {WAIT:g}); then it stops, having recorded nothing")
     parser.set_defaults(func=cmd_record)

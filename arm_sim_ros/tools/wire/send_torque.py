@@ -6,9 +6,15 @@ command is repeated at --rate until Ctrl-C or --duration; --once sends it one ti
 """
 from __future__ import annotations
 
+import sys
 import time
 from math import isfinite
+
+from ...interface import COMMAND_TOPIC, FLOAT64_MULTI_ARRAY, wrong_type
 from ...usage import UsageError
+
+
+WAIT = 30.0     # a node started at the same time, or after, on a loaded machine: found
 
 
 def add_parser(subparsers) -> None:
@@ -22,8 +28,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     parser.add_argument("--once", action="store_true", help="send one command and exit")
     parser.add_argument("--topic", default="joint_torque_commands", help="ROS topic name")
-    parser.add_argument("--wait", type=float, default=5.0,
-                        help="seconds to wait for the node to be discovered (default 5)")
+    parser.add_argument("--wait", type=float, default=WAIT,
+                        help=f"seconds to wait for the node to be discovered (default {WAIT:g}): "
+                             "it may start after this")
     parser.set_defaults(func=cmd_send_torque)
 
 
@@ -45,10 +52,18 @@ def cmd_send_torque(args) -> int:
     from ...node.wire.messages import check_topic_name
 
     check_topic_name(args.topic, "--topic")   # before joining the network
+    if problem := wrong_type(args.topic, FLOAT64_MULTI_ARRAY):
+        raise UsageError(f"--topic {args.topic}: {problem} (the arm_sim node's topic); "
+                         f"send-torque publishes {FLOAT64_MULTI_ARRAY} torques: leave --topic "
+                         f"out for {COMMAND_TOPIC}")
     publisher = TorquePublisher(args.topic)
     if not publisher.wait_for_subscriber(args.wait):
-        print(f"send-torque: no subscriber on {args.topic} after {args.wait:g} s; is arm_sim_node "
-              "running with the same ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE?")
+        others = publisher.other_types()
+        why = (f"{args.topic} carries {', '.join(others)} on the wire, not "
+               f"{FLOAT64_MULTI_ARRAY}" if others else "is arm_sim_node running with the same "
+               "ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE?")
+        print(f"send-torque: no subscriber on {args.topic} after {args.wait:g} s; {why}",
+              file=sys.stderr)
         return 1
     torques = list(args.torques)
     if args.once:
@@ -65,6 +80,9 @@ class TorquePublisher:
     """A Float64MultiArray writer on `rt/<topic>` with the ROS default QoS."""
 
     def __init__(self, topic: str = "joint_torque_commands", domain_id=None, config=None):
+        from cyclonedds.builtin import (BuiltinDataReader, BuiltinTopicDcpsPublication,
+                                        BuiltinTopicDcpsSubscription)
+        from cyclonedds.core import InstanceState, ReadCondition
         from cyclonedds.pub import DataWriter
         from cyclonedds.topic import Topic
 
@@ -72,10 +90,22 @@ class TorquePublisher:
 
         self._msg = msg
         self.participant = msg.make_participant(domain_id, config)
+        self.topic = msg.ros_topic(topic)
         self.writer = DataWriter(
-            self.participant,
-            Topic(self.participant, msg.ros_topic(topic), msg.Float64MultiArray),
+            self.participant, Topic(self.participant, self.topic, msg.Float64MultiArray),
             qos=msg.default_qos(msg.Float64MultiArray))
+        # what discovery finds meanwhile, to name a type that stops a match (other_types)
+        self._endpoints = [(reader, ReadCondition(reader, InstanceState.Alive)) for reader in (
+            BuiltinDataReader(self.participant, kind)
+            for kind in (BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription))]
+
+    def other_types(self) -> list:
+        """The ROS types other endpoints on the wire use on this topic, if not ours (a
+        subscriber of another type never matches), as discovery has told the readers made
+        with the writer."""
+        found = {e.type_name for reader, alive in self._endpoints
+                 for e in reader.take(N=10_000, condition=alive) if e.topic_name == self.topic}
+        return sorted(ros_type(t) for t in found - {"std_msgs::msg::dds_::Float64MultiArray_"})
 
     def wait_for_subscriber(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -107,3 +137,8 @@ class TorquePublisher:
     def _seconds(s: float) -> int:
         from cyclonedds.util import duration
         return duration(seconds=s)
+
+
+def ros_type(dds_type: str) -> str:
+    """`sensor_msgs::msg::dds_::JointState_` as ROS names it: sensor_msgs/msg/JointState."""
+    return dds_type.replace("::dds_::", "::").removesuffix("_").replace("::", "/")
