@@ -14,7 +14,8 @@ from math import isfinite
 
 from ..interface import NODE_NAME
 from ..physics.effects import servo
-from ..physics.scene import angle_warning, load_scene
+from ..physics.model import angle_warning
+from ..physics.scene import load_scene
 from ..physics.urdf.read import changed_values, read_urdf
 from ..physics.simulator import Simulator, abs_residual
 from .commands.callbacks import CommandInput
@@ -44,7 +45,7 @@ class ArmSimCore(CommandInput):
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
         self._event(started(config))
-        if warning := angle_warning(config.scene, node=True):
+        if warning := angle_warning(config.scene.initial_positions, node=True):
             log.warning(warning)
 
     received_commands = property(lambda self: self.commands.received)

@@ -7,7 +7,7 @@ links horizontal. Plain floats: a 2-DOF arm is far cheaper without numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from math import cos, isfinite, sin
+from math import cos, isfinite, pi, radians, sin
 
 PAIR_FIELDS = ("link_lengths", "link_masses", "com_distances", "com_inertias")
 MAX_ANGLE = 1e6   # rad: beyond it sin and cos keep no digit of an angle; nothing physical goes there
@@ -132,6 +132,21 @@ class ArmParameters:
         """(k1, k2) with V = gravity (k1 sin q1 + k2 sin(q1 + q2))."""
         (l1, _), (m1, m2), (r1, r2) = self.link_lengths, self.link_masses, self.com_distances
         return m1 * r1 + m2 * l1, m2 * r2
+
+
+def angle_warning(initial_positions, node: bool = False) -> str | None:
+    """A sentence when an initial angle is beyond one turn: likely degrees given as radians."""
+    beyond = [q for q in initial_positions if abs(q) > 2 * pi]
+    if not beyond:
+        return None
+    if node:   # ROS 2 parameters are plain doubles: give the radians
+        meant = "-p initial_positions:=[" + ", ".join(
+            f"{radians(q):.6g}" for q in initial_positions) + "]"
+    else:
+        meant = "initial_positions=" + ",".join(f"{q:g}deg" for q in initial_positions)
+    return (f"initial_positions {list(initial_positions)} rad: {beyond[0]:g} rad is more "
+            f"than a full turn (2π = 6.283 rad); angles are radians. If you meant degrees, "
+            f"write {meant}")
 
 
 def fold_payload(length, mass, com, inertia, payload):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from math import inf, isfinite, pi, radians
+from math import inf, isfinite, radians
 from pathlib import Path
 
 from .. import yaml_files
@@ -323,21 +323,6 @@ def parse_value(key: str, text: str):
         raise SceneError(f"{key}={text!r} is malformed: expected "
                          f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
     return text
-
-
-def angle_warning(scene: "Scene", node: bool = False) -> str | None:
-    """A sentence when an initial angle is beyond one turn: likely degrees given as radians."""
-    beyond = [q for q in scene.initial_positions if abs(q) > 2 * pi]
-    if not beyond:
-        return None
-    if node:   # ROS 2 parameters are plain doubles: give the radians
-        meant = "-p initial_positions:=[" + ", ".join(
-            f"{radians(q):.6g}" for q in scene.initial_positions) + "]"
-    else:
-        meant = "initial_positions=" + ",".join(f"{q:g}deg" for q in scene.initial_positions)
-    return (f"initial_positions {list(scene.initial_positions)} rad: {beyond[0]:g} rad is more "
-            f"than a full turn (2π = 6.283 rad); angles are radians. If you meant degrees, "
-            f"write {meant}")
 
 
 def _number(key: str, text: str) -> float:

@@ -5,7 +5,8 @@ import sys
 from dataclasses import replace as dataclass_replace
 from pathlib import Path
 
-from ..physics.scene import Scene, SceneError, angle_warning, load_scene, parse_value
+from ..physics.model import angle_warning
+from ..physics.scene import Scene, SceneError, load_scene, parse_value
 from ..physics.urdf.read import changed_values, read_urdf
 
 
@@ -33,7 +34,7 @@ def scene_from_args(args, note=None) -> Scene:
     if twice:                   # the last would win unseen
         raise SceneError(f"--set {twice} is given twice; give it once")
     scene = scene.with_text_overrides(getattr(args, "set", None) or [])
-    warning = angle_warning(scene)
+    warning = angle_warning(scene.initial_positions)
     if warning:
         note(f"warning: {warning}")
     return scene

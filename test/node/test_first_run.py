@@ -9,7 +9,8 @@ from tools.test_no_surprises import ListLog
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import resolve_parameters
 from arm_sim_ros.physics.scene import load_scene
-from arm_sim_ros.physics.simulator import LEVELS, Event, Simulator
+from arm_sim_ros.physics.reports import LEVELS, Event
+from arm_sim_ros.physics.simulator import Simulator
 
 
 def said(log, level):

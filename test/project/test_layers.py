@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "arm_sim_ros"
 # Layers, lowest first, each with its groups (a module or a folder), lowest first.
 ORDER = {
     "base": ["usage", "interface", "yaml_files", "outputs"],
-    "physics": ["model", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
+    "physics": ["model", "reports", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
                 "scene", "urdf", "compiled", "simulator", "batch"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
