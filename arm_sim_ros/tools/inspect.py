@@ -1,4 +1,5 @@
-"""`arm-sim inspect REC.rrd`: what a Rerun recording of this package holds, as text.
+"""`arm-sim inspect REC.rrd`: what a Rerun recording of this package holds, as text;
+`arm-sim inspect --source SCENE`: the module a scene compiles to.
 
 First the recording's properties (the scene, integrator, effects, clock and units the
 recorder stored), one `# property.key = value` line each; then its scalar series as CSV on
@@ -6,11 +7,17 @@ simulated time: sim_time [s], ros_time and log_time [ns since the epoch], then o
 per series component, headed `entity:series name [unit]`. Cells a series has no value for
 (the node's per-tick story between ticks) are empty. `--every N` keeps every Nth row;
 `--properties` prints only the properties, `--no-properties` only the table.
+
+The compiled path's code is generated (physics/compiled/build.py): `--source SCENE` prints
+the module a scene's steps and runs compile to, as written to the kernel cache, headed by
+its file name and what runs it. A switching scene's modes each compile a module of the same
+form with that mode's right-hand side, when first met.
 """
 from __future__ import annotations
 
 import csv
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -31,6 +38,14 @@ def property_lines(props: dict) -> list[str]:
 
 
 def cmd_inspect(args) -> int:
+    if args.source is not None:
+        if args.recording is not None:
+            raise UsageError("give a recording (REC.rrd) or --source SCENE, not both")
+        print(scene_source(args.source), end="")
+        return 0
+    if args.recording is None:
+        raise UsageError("inspect needs a recording (REC.rrd), or --source SCENE for the "
+                         "module a scene compiles to")
     from ..recording.rrd.readback import RecordingError, read, table  # rerun: only here
 
     path = Path(args.recording)
@@ -54,6 +69,38 @@ def cmd_inspect(args) -> int:
     return 0
 
 
+def scene_source(name: str) -> str:
+    """The generated module of scene `name` (a preset or a file), with a header saying its
+    cache file and what runs it; nothing is compiled."""
+    from ..physics.compiled import build
+    from ..physics.scene import SceneError, load_scene
+    from ..physics.simulator import Simulator
+
+    try:
+        scene = load_scene(name)
+    except SceneError as error:
+        raise UsageError(str(error)) from None
+    previous = os.environ.get("ARM_SIM_COMPILED")
+    os.environ["ARM_SIM_COMPILED"] = "0"          # the text only: no compile, no cache write
+    try:
+        sim = Simulator(scene)
+    finally:
+        if previous is None:
+            del os.environ["ARM_SIM_COMPILED"]
+        else:
+            os.environ["ARM_SIM_COMPILED"] = previous
+    if not hasattr(sim._step, "source") or hasattr(sim._step, "rtol"):
+        raise UsageError(f"scene {scene.name} runs {scene.method}, an adaptive step: it has "
+                         "no compiled module (Python's path)")
+    text, _ = build.module_source(sim.dynamics, sim._step)
+    runs = ("the compiled path" if build.compilable(sim.dynamics, sim._step) else
+            "Python's path (numba off or absent, or a servo's set-points)")
+    header = [f"# {build.module_name(text)}.py in {build.cache_dir()}",
+              f"# scene {scene.name}: {scene.method}, effects "
+              f"{', '.join(e.name for e in sim.dynamics.active) or 'none'}; runs on {runs}"]
+    return "\n".join(header) + "\n" + text
+
+
 def not_a_recording(path: Path, given: str) -> str:
     """Why `path` is no file to inspect: a bag directory, another directory, or nothing."""
     if (path / "metadata.yaml").is_file():
@@ -69,7 +116,10 @@ def not_a_recording(path: Path, given: str) -> str:
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="print a Rerun recording's properties and its "
                                               "series as CSV")
-    p.add_argument("recording", metavar="REC.rrd", help="a recording written by arm-sim or the node")
+    p.add_argument("recording", metavar="REC.rrd", nargs="?",
+                   help="a recording written by arm-sim or the node")
+    p.add_argument("--source", metavar="SCENE",
+                   help="print the module the scene (a preset or a .yaml file) compiles to")
     p.add_argument("--every", type=int, default=1, metavar="N", help="keep every Nth row")
     only = p.add_mutually_exclusive_group()
     only.add_argument("--properties", action="store_true", help="print only the properties")

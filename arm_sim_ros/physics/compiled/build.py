@@ -222,10 +222,14 @@ def constants_of(names, values, command=(0.0, 0.0)):
     return np.array([command[0], command[1], *(values[n] for n in names)], dtype=float)
 
 
+def module_name(source: str) -> str:
+    """The cached module's name: the hash of its text, so a changed text is a new module."""
+    return f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}"
+
+
 def load(source: str):
     """The module of `source`, written once to the cache directory under its hash."""
-    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
-    name = f"arm_sim_kernel_{digest}"
+    name = module_name(source)
     if name in sys.modules:
         return sys.modules[name]
     directory = cache_dir()

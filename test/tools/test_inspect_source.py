@@ -1,0 +1,48 @@
+"""`arm-sim inspect --source SCENE`: the module a scene compiles to, as the compiled path
+writes it to the kernel cache, printed without compiling anything."""
+import os
+
+import pytest
+
+from arm_sim_ros.physics.compiled import build
+from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.tools import cli
+
+
+def printed(capsys, *argv) -> str:
+    assert cli.main(["inspect", *argv]) == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("scene", ["release", "stick_slip", "geared_arm"])
+def test_the_source_is_the_module_the_compiled_path_loads(scene, capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("ARM_SIM_CACHE", str(tmp_path))
+    out = printed(capsys, "--source", scene)
+    name_line, about, text = out.split("\n", 2)
+    monkeypatch.setenv("ARM_SIM_COMPILED", "0")
+    sim = Simulator(load_scene(scene))
+    assert text == build.module_source(sim.dynamics, sim._step)[0]
+    assert name_line == f"# {build.module_name(text)}.py in {tmp_path}"
+    assert about.startswith(f"# scene {scene}: {sim.scene.method}, effects gravity")
+    compile(text, name_line, "exec")                   # Python, whole
+    assert "def run_books(" in text and "@njit(cache=True)" in text
+    assert os.listdir(tmp_path) == []                  # nothing compiled, nothing written
+
+
+def test_the_source_says_which_path_runs_it(capsys, monkeypatch):
+    monkeypatch.setenv("ARM_SIM_COMPILED", "0")
+    assert "runs on Python's path" in printed(capsys, "--source", "release").split("\n")[1]
+    assert "runs on Python's path" in printed(capsys, "--source", "servo_hold").split("\n")[1]
+    assert os.environ["ARM_SIM_COMPILED"] == "0"       # left as it was
+
+
+def test_inspect_wants_a_recording_or_a_scene_and_says_so(capsys, tmp_path):
+    for argv, said in [([], "inspect needs a recording (REC.rrd), or --source SCENE"),
+                       (["x.rrd", "--source", "release"], "not both"),
+                       (["--source", "relase"], "did you mean 'release'"),
+                       (["--source", str(tmp_path / "adaptive.yaml")], "an adaptive step")]:
+        if argv and argv[-1].endswith("adaptive.yaml"):
+            (tmp_path / "adaptive.yaml").write_text("integrator: dopri5\n", encoding="utf-8")
+        assert cli.main(["inspect", *argv]) == 2
+        assert said in capsys.readouterr().err
