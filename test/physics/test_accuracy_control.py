@@ -106,12 +106,15 @@ def test_contacts_and_free_flight_are_controlled_apart():
 
 
 def test_semi_implicit_euler_at_mujocos_step_runs_the_release_to_the_end():
-    """Stable with a bounded energy error: never called diverged (the guard's scale is the
-    energy in play, ~20 J here, not 1 + |E(0)| = 1 J because the arm starts horizontal)."""
+    """Stable, never called diverged (the guard's scale is the energy in play, ~20 J here, not
+    1 + |E(0)| = 1 J because the arm starts horizontal). Its energy error is not bounded on
+    this chaotic motion: checked at every state, 27 % of the energy in play at t = 6.33 s
+    (69 % by 30 s), so the books may be said not to close; that is not a divergence."""
     sim = Simulator(load_scene("release").replace(integrator="semi_implicit_euler",
                                                   tolerance=0.0, step_size=0.01))
     sim.run(10.0)
-    assert sim.fault is None and sim.diverged is None
+    assert sim.diverged is None and sim.steps == 1000
+    assert sim.fault is None or "the energy books do not close" in sim.fault
     assert 19.0 < sim.energy_in_play < 30.0
 
 

@@ -20,8 +20,9 @@ from __future__ import annotations
 from ..model import MAX_ANGLE
 
 CHECK_EVERY = 64          # steps between raises of the energy in play (a state's own peak)
-BOOKS_FRACTION = 0.25     # a stable method's energy error stays within this (semi-implicit
-                          # Euler at 10 ms on release: 12 %)
+BOOKS_FRACTION = 0.25     # a method that resolves the motion keeps its energy error within
+                          # this (release over 10 s: rk4 at 50 ms 3.4 %, semi-implicit Euler
+                          # at 2 ms 5.5 %; at 10 ms it reaches 27 %, said)
 FLOOR = 1e-9              # J: rounding of an arm at rest
 
 
