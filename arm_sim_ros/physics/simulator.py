@@ -47,13 +47,11 @@ class Simulator:
     def _build(self, scene: Scene, command=None) -> None:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
         self.scene, self.arm = scene, scene.arm
-        self.dynamics = build_dynamics(scene, command)
+        self.dynamics, self._step = code_of(scene, command)
         self.channels = self.dynamics.channels
         self.extra = self.dynamics.extra
         self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
         self._rhs = self.dynamics.function
-        self._step = step_for(self._tableau, len(self.channels), self.dynamics.decay,
-                              rtol=scene.rtol, atol=scene.atol)
         self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
             self._tableau, self.dynamics.active, self.arm, self.step_size)
@@ -230,6 +228,15 @@ class Simulator:
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
         return largest
+
+
+def code_of(scene: Scene, command=None) -> tuple:
+    """(dynamics, step): the scene's generated right-hand side and its method's step, the
+    text the compiled path compiles (arm-sim inspect --source prints it)."""
+    dynamics = build_dynamics(scene, command)
+    step = step_for(INTEGRATORS[scene.method], len(dynamics.channels), dynamics.decay,
+                    rtol=scene.rtol, atol=scene.atol)
+    return dynamics, step
 
 
 def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> None:

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -74,30 +73,22 @@ def scene_source(name: str) -> str:
     cache file and what runs it; nothing is compiled."""
     from ..physics.compiled import build
     from ..physics.scene import SceneError, load_scene
-    from ..physics.simulator import Simulator
+    from ..physics.simulator import code_of
 
     try:
         scene = load_scene(name)
     except SceneError as error:
         raise UsageError(str(error)) from None
-    previous = os.environ.get("ARM_SIM_COMPILED")
-    os.environ["ARM_SIM_COMPILED"] = "0"          # the text only: no compile, no cache write
-    try:
-        sim = Simulator(scene)
-    finally:
-        if previous is None:
-            del os.environ["ARM_SIM_COMPILED"]
-        else:
-            os.environ["ARM_SIM_COMPILED"] = previous
-    if not hasattr(sim._step, "source") or hasattr(sim._step, "rtol"):
+    dynamics, step = code_of(scene)
+    if not hasattr(step, "source") or hasattr(step, "rtol"):
         raise UsageError(f"scene {scene.name} runs {scene.method}, an adaptive step: it has "
                          "no compiled module (Python's path)")
-    text, _ = build.module_source(sim.dynamics, sim._step)
-    runs = ("the compiled path" if build.compilable(sim.dynamics, sim._step) else
+    text, _ = build.module_source(dynamics, step)
+    runs = ("the compiled path" if build.compilable(dynamics, step) else
             "Python's path (numba off or absent, or a servo's set-points)")
     header = [f"# {build.module_name(text)}.py in {build.cache_dir()}",
               f"# scene {scene.name}: {scene.method}, effects "
-              f"{', '.join(e.name for e in sim.dynamics.active) or 'none'}; runs on {runs}"]
+              f"{', '.join(e.name for e in dynamics.active) or 'none'}; runs on {runs}"]
     return "\n".join(header) + "\n" + text
 
 
