@@ -199,7 +199,9 @@ class Worker:
         node = self.node(transport, scene=scene, publish_rate=rate)
         self._spin(transport, node, 1.0)
         cpu, wall, simulated = time.process_time(), time.perf_counter(), node.core.sim.time
-        self._spin(transport, node, 1.0 + seconds)
+        # From where the warm-up ended, not from 1 s: one rclpy spin_once can run past
+        # 1 + seconds (geared_arm at rest, 100 Hz), which left the window empty (0.0).
+        self._spin(transport, node, self._elapsed(node) + seconds)
         simulated = node.core.sim.time - simulated
         rtf = {"rtf": simulated / (time.process_time() - cpu),
                "wall": simulated / (time.perf_counter() - wall)}
@@ -215,6 +217,11 @@ class Worker:
         share = (time.process_time() - cpu) / (time.perf_counter() - wall)
         self.close(transport, node)
         return {"share": share}
+
+    @staticmethod
+    def _elapsed(node) -> float:
+        """Simulated seconds since the node started (what _spin's `until` counts)."""
+        return (node.core.stamp_ns() - node.core.start_stamp_ns) / 1e9
 
     def _spin(self, transport: str, node, until: float) -> None:
         if transport == "dds":
