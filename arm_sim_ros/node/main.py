@@ -145,6 +145,13 @@ def main(argv=None) -> int:
         return REFUSED
     except KeyboardInterrupt:
         return DONE
+    except Exception:
+        # A signal met inside numba's first compile is dropped in llvmlite's callback and
+        # leaves numba's half-built library to fail ("no compiled object yet"): the stop
+        # asked for is what happened, not a fault.
+        if stop.requested:
+            return DONE
+        raise
 
 
 ROS_FLAGS = ("-p", "--param", "--params-file", "-r", "--remap", "--log-level", "-e",

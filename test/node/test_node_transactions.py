@@ -460,3 +460,25 @@ def test_a_viewer_address_rerun_cannot_take_is_refused_live_and_at_start(address
                                      "rerun+http://127.0.0.1:9876/proxy"])
 def test_the_viewer_addresses_rerun_takes_are_accepted(address):
     assert resolve_parameters({"rerun_connect": address}).values["rerun_connect"] == address
+
+
+STOPPED_INSIDE_A_COMPILE = """
+import sys
+from arm_sim_ros.node import main as node_main
+def run_dds(ros_argv, duration, status, stop):
+    stop.requested = {requested}          # as Stop does when the signal came
+    raise RuntimeError("no compiled object yet for <Library 'step'>")   # numba, half built
+node_main.run_dds = run_dds
+sys.exit(node_main.main(["--transport", "dds", "--quiet"]))
+"""
+
+
+@pytest.mark.parametrize("requested, code", [(True, 0), (False, 1)])
+def test_a_stop_that_broke_a_first_compile_is_a_stop_not_a_fault(requested, code):
+    """SIGTERM during a cold compile: llvmlite's callback drops the KeyboardInterrupt and
+    numba then fails on its half-built library (seen: exit 1 with a traceback, one stop in
+    three). With a stop asked for, that failure is the stop: exit 0; without, it is raised."""
+    done = subprocess.run([sys.executable, "-c", STOPPED_INSIDE_A_COMPILE.format(
+        requested=requested)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == code, done.stderr
+    assert ("Traceback" in done.stderr) == (not requested)
