@@ -17,7 +17,7 @@ Two small generalisations cover every method offered here:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from functools import lru_cache
 from math import exp, lcm, nan
@@ -270,6 +270,7 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
         # h), so reset() and replays are reproducible bit for bit.
         slopes = f(*y[:4 + extra])
         done, dt, step.last_error = 0.0, h, 0.0
+        step.last_sizes = sizes = []          # the accepted sub-steps (trust/embedded.py)
         while True:
             remaining = h - done
             final = dt >= 0.99 * remaining       # no sliver sub-step before the boundary
@@ -278,6 +279,7 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
             new, new_slopes, error, local = attempt(f, *y, dt, *slopes)
             if error <= 1.0:
                 step.last_error += local      # the pair's estimate, rad and rad/s
+                sizes.append(dt)
                 if final:
                     return new
                 y, slopes, done = new, new_slopes, done + dt
@@ -289,9 +291,15 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
                 return (nan,) * size              # cannot meet the tolerance: say so, non-finite
 
     step.source = source
-    step.rtol, step.atol, step.last_error = float(rtol), float(atol), 0.0
+    step.rtol, step.atol, step.last_error, step.last_sizes = float(rtol), float(atol), 0.0, []
     step.channels = channels
+    step.fixed = compile_step(fixed_step(tableau), channels, extra=extra)
     return step
+
+
+def fixed_step(tableau: ButcherTableau) -> ButcherTableau:
+    """An embedded pair's higher-order solution as a fixed-step method (no error control)."""
+    return replace(tableau, name=f"{tableau.name}_fixed", embedded_b=None, embedded_order=0)
 
 
 # --- Exponential RK4: stiff linear decays (winding currents) integrated exactly ------------

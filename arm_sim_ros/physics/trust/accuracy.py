@@ -5,8 +5,8 @@ Local error (benchmarks/bench_tolerance.py, test/physics/test_error_estimate.py)
 doubling on a schedule. A check takes the step (n equal sub-steps, bit for bit the plain
 step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1) is the step's
 local error at its end (where a stiff mode the plan's sub-steps damp has decayed), signed,
-for every state. An embedded pair (dopri5) is measured against its own step at 1/TIGHTER
-of its tolerances. Checks come every FIRST_EVERY steps at first, then as often as the local
+for every state. An embedded pair (dopri5) doubles the sub-steps its error control took
+(embedded.py). Checks come every FIRST_EVERY steps at first, then as often as the local
 error moves (shadow.py: up to every MAX_EVERY; at rest, every MAX_EVERY). Switching scenes
 (events.py): a step with a located switch or an engaged compliant limit is checked, each
 piece doubled, the halves going on from their own state between switches (attempt).
@@ -31,9 +31,8 @@ from __future__ import annotations
 
 from ..stepping import stability
 from .controller import SAFETY, Control, retake, said_count, said_lost, said_unreachable
-from ..stepping.integrators import compile_step
 from .shadow import FIRST_EVERY, ROUNDING, Shadow, Twin, next_every
-from .embedded import TIGHTER, Embedded
+from .embedded import Embedded
 from .unestimated import Off, Unchecked
 
 NO_GAIN, GIVE_UP = 0.9, 16   # 16x the sub-steps leaving 90 % of the error: none to buy
@@ -335,9 +334,7 @@ def plan(tableau, step, substeps: int, tolerance: float, width: int, emit=None,
         # without the switches its error control would chase the kink forever.
         return Unchecked(stepper.advance, substeps, stepper)
     if getattr(tableau, "adaptive", False):
-        tight = compile_step(tableau, step.channels, step.rtol / TIGHTER,
-                             step.atol / TIGHTER, states - 4)
-        books = Embedded(step, tight, states, clock)   # (an adaptive method plans no sub-steps)
+        books = Embedded(step, tableau.order, states, clock)   # (it plans no sub-steps)
     elif substeps > stability.MAX_SUBSTEPS:   # the stability plan refuses: keep its refusal
         return Unchecked(stability.substepping(step, substeps, stiff), substeps)
     else:

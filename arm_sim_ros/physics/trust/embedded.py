@@ -1,22 +1,24 @@
 """The error books of an embedded pair (dopri5), which controls its own steps: its own local
-error estimate, and the shadow's measured on the schedule against a tighter step.
+error estimate, and the shadow's measured on the schedule by step doubling, as a fixed-step
+method's is (accuracy.py).
 """
 from __future__ import annotations
 
 from .shadow import FIRST_EVERY, Shadow, next_every
-
-TIGHTER = 1000.0          # an embedded pair's local error: against its step at tolerances / this
 
 
 class Embedded:
     """The same books for an embedded pair (dopri5), whose rtol and atol, not `tolerance`,
     control it. `error_estimate` is the pair's own (the sum over its accepted sub-steps:
     its 4th-order companion's error, ~10x the 5th-order solution's). The shadow's local
-    error is measured on the schedule against the same step at TIGHTER times smaller
-    tolerances (an error-controlled step's error goes as its tolerance)."""
+    error is measured on the schedule by Richardson step doubling of the sub-steps the pair
+    took: each taken again as two halves by its higher-order solution, the difference at the
+    step's end x 2^p / (2^p - 1). So a check costs the work of the trajectory it checks,
+    whatever tolerances led there (one trajectory, one price: `arm-sim accuracy`)."""
 
-    def __init__(self, step, tight, states: int = 4, clock=None):
-        self.step, self.tight, self.states, self.clock = step, tight, states, clock
+    def __init__(self, step, order: int, states: int = 4, clock=None):
+        self.step, self.states, self.clock = step, states, clock
+        self.factor = 2.0 ** order / (2.0 ** order - 1.0)
         self.substeps = 1
         self.reset()
 
@@ -45,8 +47,10 @@ class Embedded:
     def check(self, f, y, h):
         y1 = self.step(f, y, h)
         self.error_estimate = self.step.last_error
-        better = self.tight(f, y, h)
-        measured = [(a - b) * TIGHTER / (TIGHTER - 1.0) for a, b in zip(y1, better[:self.states])]
+        half, fixed = y, self.step.fixed
+        for size in self.step.last_sizes:
+            half = fixed(f, fixed(f, half, 0.5 * size), 0.5 * size)
+        measured = [(a - b) * self.factor for a, b in zip(y1, half[:self.states])]
         predicted, self.shadow.local = self.shadow.local, measured
         self.shadow.follow(self.step, f, y, y1, h)
         self.every = next_every(self.every, predicted, measured)
