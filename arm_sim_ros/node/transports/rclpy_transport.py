@@ -153,8 +153,9 @@ class ArmSimNode(Node):
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
-        data = self.core.tick(clock_listened=self.core.config.values["publish_clock"] and
-                              self.clock_publisher.get_subscription_count() > 0)
+        values = self.core.config.values    # whether /clock is listened to: lockstep asks it
+        data = self.core.tick(clock_listened=values["lockstep"] and values["publish_clock"]
+                              and self.clock_publisher.get_subscription_count() > 0)
         if data is not None:
             self._publish(data)
         return data
