@@ -124,10 +124,15 @@ def rhs_source(source: str, names) -> str:
 
 
 def step_source(step, names) -> str:
-    """The generated step with f(...) the module's rhs(..., K), its constants from K."""
+    """The generated step with f(...) the module's rhs(..., K), its constants from K; and
+    step_from(y, h, K, first), the same step with its first stage's slopes given (the rhs
+    at y: a check's step and its first half share them, the same numbers computed once)."""
     source = step.source.replace("def step(f, y, h):", "def step(y, h, K):\n"
                                  + "\n".join(_reads(names)))
-    return re.sub(r"= f\(([^)]*)\)", r"= rhs(\1, K)", source)
+    given = re.sub(r"= f\(([^)]*)\)", "= first", source.replace(
+        "def step(y, h, K):", "def step_from(y, h, K, first):"), count=1)
+    return "\n@njit(cache=True)\n".join(
+        re.sub(r"= f\(([^)]*)\)", r"= rhs(\1, K)", text) for text in (source, given))
 
 
 def energy_source(dynamics):
@@ -204,6 +209,7 @@ def module_source(dynamics, step, rhs=None, guards=""):
         lines += ["@njit(cache=True)", function]
     lines.append(energy[0] if energy else NO_ENERGY)
     fill = dict(items=", ".join(f"y[{k}]" for k in range(width)),
+                slopes=", ".join(f"state[{k}]" for k in range(4 + len(dynamics.extra))),
                 zitems=", ".join(f"z[{k}]" for k in range(width)),
                 ditems=", ".join(f"state[{k}] - D[{k}] if {k} < states else state[{k}]"
                                  for k in range(width)),

@@ -4,7 +4,7 @@ the state's entries and the books' constants and compiles them with numba.
 
 run_books does what Simulator.step does on a smooth scene, step after step, with the same
 operations in the same order: the planned sub-steps, the shadow beside them (shadow.py),
-the accuracy books' checks on their schedule (accuracy.py: the step doubled, a miss of the
+the accuracy books' checks on their schedule (accuracy.py: the step measured, a miss of the
 tolerance taken again, the controller's count, the next check), the divergence check of
 every state and the energy in play's peak every CHECK_EVERY steps (guard.py). Python's
 max(a, b) keeps a unless b > a: so does `bigger`. Where Python would say something (a new
@@ -103,7 +103,8 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
             if not finite(new):
                 code = 1
                 break''',
-    CHECKED='''            new, error, scaled = doubled(state, h, n, K, G, factor, states, False, G)
+    CHECKED='''            new, error, scaled = checked(state, h, n, K, G, factor, states, floor,
+                                         stiff_below, orderf)
             if not (finite(new) and measured(G, states)):
                 code = 1
                 break
@@ -113,8 +114,8 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                 first = scaled
                 while scaled > target and count < cap:    # a miss: taken again
                     count = retake(count, scaled / den, order, cap)
-                    new, error, scaled = doubled(state, h, count, K, G, factor, states, False,
-                                                   G)
+                    new, error, scaled = checked(state, h, count, K, G, factor, states,
+                                                 floor, stiff_below, orderf)
                     if not (finite(new) and measured(G, states)) or (
                             count >= {GIVE_UP!r} * n and scaled > {NO_GAIN!r} * first):
                         code = 1                          # said: Python's
@@ -163,6 +164,18 @@ def substepped(state, h, n, K):
 
 
 @njit(cache=True)
+def substepped_from(state, h, n, K, first):
+    """substepped, the rhs at `state` given (`first`: a check computes it once)."""
+    if n == 1:
+        return step_from(state, h, K, first)
+    dt = h / n
+    state = step_from(state, dt, K, first)
+    for k in range(n - 1):
+        state = step(state, dt, K)
+    return state
+
+
+@njit(cache=True)
 def grown(new, half, D, k, summed):
     """State k's difference of the step from its halves, less where they started apart."""
     return new[k] - half[k] - D[k] if summed else new[k] - half[k]
@@ -174,11 +187,18 @@ def doubled(state, h, n, K, G, factor, states, summed, D):
     error), the signed local error of every state into G (Richardson: 2n half sub-steps).
     Where `summed` (a switching step's sub-steps, accuracy.attempt), the halves start D
     from the state, and what this sub-step grows is added to D and, signed, to G."""
-    new = substepped(state, h, n, K)
-    half = ({ditems},) if summed else state
     hs = 0.5 * h / n
-    for k in range(2 * n):
-        half = step(half, hs, K)
+    if summed:
+        new = substepped(state, h, n, K)
+        half = ({ditems},)
+        for k in range(2 * n):
+            half = step(half, hs, K)
+    else:                 # the step and its first half start from one state: one rhs there
+        first = rhs({slopes}, K)
+        new = substepped_from(state, h, n, K, first)
+        half = step_from(state, hs, K, first)
+        for k in range(2 * n - 1):
+            half = step(half, hs, K)
     e0 = abs(grown(new, half, D, 0, summed) * factor)       # this (sub-)step's own, before
     e1 = abs(grown(new, half, D, 1, summed) * factor)       # D moves on
     e2 = abs(grown(new, half, D, 2, summed) * factor)
@@ -190,6 +210,25 @@ def doubled(state, h, n, K, G, factor, states, summed, D):
             G[k] = G[k] + difference * factor
         else:
             G[k] = difference * factor
+    scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
+    return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
+
+
+@njit(cache=True)
+def checked(state, h, n, K, G, factor, states, base, stiff_below, orderf):
+    """accuracy.Accuracy.measure: (the step as n sub-steps, its local error, its scaled
+    error), the signed local error of every state into G: against ceil(n/2) sub-steps
+    where accuracy.coarsened takes them (Richardson the other way), else 2n halves."""
+    m = (n + 1) // 2
+    if not (n > 1 and m >= base and not m < stiff_below):
+        return doubled(state, h, n, K, G, factor, states, False, G)
+    first = rhs({slopes}, K)
+    new = substepped_from(state, h, n, K, first)
+    coarse = substepped_from(state, h, m, K, first)
+    ratio = (n / m) ** orderf - 1.0
+    for k in range(states):
+        G[k] = (coarse[k] - new[k]) / ratio
+    e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
     scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
     return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
 

@@ -17,7 +17,7 @@ Two small generalisations cover every method offered here:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from fractions import Fraction
 from functools import lru_cache
 from math import exp, lcm, nan
@@ -293,13 +293,7 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
     step.source = source
     step.rtol, step.atol, step.last_error, step.last_sizes = float(rtol), float(atol), 0.0, []
     step.channels = channels
-    step.fixed = compile_step(fixed_step(tableau), channels, extra=extra)
     return step
-
-
-def fixed_step(tableau: ButcherTableau) -> ButcherTableau:
-    """An embedded pair's higher-order solution as a fixed-step method (no error control)."""
-    return replace(tableau, name=f"{tableau.name}_fixed", embedded_b=None, embedded_order=0)
 
 
 # --- Exponential RK4: stiff linear decays (winding currents) integrated exactly ------------

@@ -4,6 +4,9 @@ method's is (accuracy.py).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
+from ..stepping.integrators import compile_step
 from .shadow import FIRST_EVERY, Shadow, next_every
 
 
@@ -16,9 +19,12 @@ class Embedded:
     step's end x 2^p / (2^p - 1). So a check costs the work of the trajectory it checks,
     whatever tolerances led there (one trajectory, one price: `arm-sim accuracy`)."""
 
-    def __init__(self, step, order: int, states: int = 4, clock=None):
+    def __init__(self, step, tableau, states: int = 4, clock=None):
         self.step, self.states, self.clock = step, states, clock
-        self.factor = 2.0 ** order / (2.0 ** order - 1.0)
+        self.factor = 2.0 ** tableau.order / (2.0 ** tableau.order - 1.0)
+        # the pair's higher-order solution alone, without error control
+        self.fixed = compile_step(replace(tableau, name=f"{tableau.name}_fixed", embedded_b=None,
+                                          embedded_order=0), step.channels, extra=states - 4)
         self.substeps = 1
         self.reset()
 
@@ -47,7 +53,7 @@ class Embedded:
     def check(self, f, y, h):
         y1 = self.step(f, y, h)
         self.error_estimate = self.step.last_error
-        half, fixed = y, self.step.fixed
+        half, fixed = y, self.fixed
         for size in self.step.last_sizes:
             half = fixed(f, fixed(f, half, 0.5 * size), 0.5 * size)
         measured = [(a - b) * self.factor for a, b in zip(y1, half[:self.states])]

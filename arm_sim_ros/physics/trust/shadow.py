@@ -3,7 +3,7 @@ measure the local error it is built from (accuracy.py).
 """
 from __future__ import annotations
 
-# Steps between doubling checks (a check: 2 steps' evaluations): FIRST_EVERY at the start,
+# Steps between checks (a check: 2 steps' evaluations, or half a split step's): FIRST_EVERY first,
 FIRST_EVERY, MIN_EVERY, MAX_EVERY = 2, 1, 32   # then as often as the local error moves:
 ROUGH, SMOOTH = 0.5, 0.125     # twice as often past ROUGH x its size (down to every step: a
                                # local error that turns within 4 steps, checked every 2, can
