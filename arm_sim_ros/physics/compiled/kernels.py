@@ -264,6 +264,9 @@ def measured(G, states):
 def ask(n, ratio, previous, order, floor, cap):
     """controller.Control.ask after a step of n sub-steps measured at `ratio`:
     (the count asked for, the ratio kept)."""
+    kept = ratio if isfinite(ratio) else previous
+    if n <= floor and ratio * {SAFETY!r} <= 1.0:    # at the floor and met: no pow to take
+        return n, kept
     if not isfinite(ratio):
         wanted = min(cap, max(floor, ceil(n * {MAX_SHRINK!r})))
     else:
@@ -274,11 +277,7 @@ def ask(n, ratio, previous, order, floor, cap):
             wanted = n
         else:
             wanted = max(floor, min(cap, ceil(w - 1e-9)))
-    if isfinite(ratio):
-        previous = ratio
-    if n <= floor and ratio * {SAFETY!r} <= 1.0:
-        return n, previous
-    return wanted, previous
+    return wanted, kept
 
 
 @njit(cache=True)

@@ -50,11 +50,10 @@ class Control:
         """The count for the next steps after a step measured at `ratio`. At the floor, a
         step that met the tolerance asks for nothing more (plain steps stay plain: the
         explainer's figures bit for bit); above it the count follows the error both ways."""
-        wanted = proposed(self.n, ratio, self.previous, order, self.floor, self.cap)
-        self.previous = ratio if isfinite(ratio) else self.previous
-        if self.n <= self.floor and ratio * SAFETY <= 1.0:
+        previous, self.previous = self.previous, ratio if isfinite(ratio) else self.previous
+        if self.n <= self.floor and ratio * SAFETY <= 1.0:   # most checks: no pow to take
             return self.n
-        return wanted
+        return proposed(self.n, ratio, previous, order, self.floor, self.cap)
 
 
 def said_count(books, wanted, first, h, reached=None, where="") -> None:
