@@ -7,6 +7,7 @@ by the energy in play, not by where V = 0 (physics/trust/guard.py).
 """
 import pytest
 
+from arm_sim_ros.physics.stepping.stability import substepping
 from arm_sim_ros.physics.trust import guard
 from arm_sim_ros.physics.trust.accuracy import DEFAULT_MAX_SUBSTEPS
 from arm_sim_ros.physics.trust.controller import proposed
@@ -174,3 +175,45 @@ def test_a_contact_too_stiff_to_resolve_is_refused_at_once_not_run_for_ever():
     sim.run(0.05)
     assert sim.holding and "compliant limit is engaged" in sim.fault
     assert sim.state[:2] == (1.3, 0.0)
+
+
+def counted_rhs(sim):
+    """The simulator's rhs, counting its evaluations in `calls[0]`."""
+    calls, rhs = [0], sim._rhs
+
+    def f(*state):
+        calls[0] += 1
+        return rhs(*state)
+    return f, calls
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 7])
+def test_a_split_step_is_checked_against_half_as_many_coarser_sub_steps(n):
+    """A step of n > 1 sub-steps is taken again as m = ceil(n/2) sub-steps, whose error is
+    (n/m)^4 times its own for rk4: its signed error is (coarse - step) / ((n/m)^4 - 1), at
+    the price of m sub-steps (2n halves before)."""
+    sim = Simulator(load_scene("release"))
+    books, y, h = sim.accuracy, sim.state, sim.step_size
+    f, calls = counted_rhs(sim)
+    step, error, scaled, signed = books.measure(f, y, h, n)
+    m = (n + 1) // 2
+    coarse = substepping(sim._step, m)(sim._rhs, y, h)
+    assert step == substepping(sim._step, n)(sim._rhs, y, h)
+    assert signed == [(c - a) / ((n / m) ** 4 - 1.0) for a, c in zip(step[:4], coarse)]
+    assert error == max(abs(e) for e in signed)
+    assert calls[0] == 4 * (n + m)
+
+
+def test_a_check_at_one_sub_step_or_one_the_plan_needs_takes_the_halves():
+    """A single sub-step has no coarser one, and a plan's stability sub-steps may not be
+    halved (its step would not be stable): both are checked against 2n halves."""
+    sim = Simulator(load_scene("release"))
+    f, calls = counted_rhs(sim)
+    sim.accuracy.measure(f, sim.state, sim.step_size, 1)
+    assert calls[0] == 4 * 3
+    stiff = Simulator(load_scene("damped_release").replace(damping=60.0))
+    books = stiff.accuracy
+    assert books.base > 1
+    f, calls = counted_rhs(stiff)
+    books.measure(f, stiff.state, stiff.step_size, books.base + 1)
+    assert calls[0] == 4 * 3 * (books.base + 1)
