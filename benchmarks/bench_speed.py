@@ -25,7 +25,8 @@ Presets table (µs per simulated second, and steps per second):
              the energy books and the switches cost beyond the steps themselves
   off of     off against the limit at the planned sub-steps (which off takes)
 Each keeps the fastest of --repeat runs of --seconds simulated seconds after one warm-up run
-(`first`: that run, compiling what it meets or loading it from the cache), timed in CPU
+(`first`: that run, compiling what it meets or loading it from the cache), a row's columns
+interleaved (each run once a round, so a slow spell falls on all of them), timed in CPU
 seconds of this process (the machine is shared: wall time would count the others' work),
 Batch in wall seconds (its threads share the work).
 
@@ -73,8 +74,8 @@ def simulator(scene, fast: bool) -> Simulator:
         os.environ.pop("ARM_SIM_COMPILED")
 
 
-def time_run(scene, seconds: float, repeat: int, fast: bool):
-    """(seconds of wall time for `seconds` simulated, path, first-call seconds)."""
+def prepared_run(scene, seconds: float, fast: bool):
+    """(a run of `seconds` simulated from the scene's start, path, first-call seconds)."""
     sim = simulator(scene, fast)
     start = time.perf_counter()
     sim.run(seconds)       # compiles (or loads from the cache) every mode the run meets
@@ -83,7 +84,24 @@ def time_run(scene, seconds: float, repeat: int, fast: bool):
     def run():
         sim.reset()
         sim.run(seconds)
-    return fastest(run, repeat), sim.path, first
+    return run, sim.path, first
+
+
+def time_run(scene, seconds: float, repeat: int, fast: bool):
+    """(CPU seconds for `seconds` simulated, path, first-call seconds)."""
+    run, path, first = prepared_run(scene, seconds, fast)
+    return fastest(run, repeat), path, first
+
+
+def interleaved(runs: dict, repeat: int) -> dict:
+    """The least time of each run over `repeat` rounds, every run once a round: a slow spell
+    of a shared machine falls on all of them alike (None: not run)."""
+    best = {key: math.inf for key in runs}
+    for _ in range(repeat):
+        for key, run in runs.items():
+            if run is not None:
+                best[key] = min(best[key], fastest(run, 1))
+    return {key: (best[key] if runs[key] is not None else None) for key in runs}
 
 
 def substeps_per_step(scene, seconds: float) -> float:
@@ -100,6 +118,12 @@ def substeps_per_step(scene, seconds: float) -> float:
 
 
 def time_limit(scene, seconds: float, repeat: int):
+    """CPU seconds of the bare compiled loop (prepared_limit), or None."""
+    run = prepared_limit(scene, seconds)
+    return run and fastest(run, repeat)
+
+
+def prepared_limit(scene, seconds: float):
     """The bare compiled RK4 loop on the scene's rhs (compiled.bare: steps, nothing else)."""
     sim = simulator(scene, False)
     dynamics = build_dynamics(scene)
@@ -113,11 +137,11 @@ def time_limit(scene, seconds: float, repeat: int):
     steps = scene.steps_for(seconds) * sim.substeps
     h = scene.step_size / sim.substeps
     module.bare(y0.copy(), h, 1, command)
-    return fastest(lambda: module.bare(y0.copy(), h, steps, command), repeat)
+    return lambda: module.bare(y0.copy(), h, steps, command)
 
 
-def time_mujoco(scene, seconds: float, repeat: int):
-    """Wall seconds of mj_step RK4 for `seconds`, or (None, why not)."""
+def prepared_mujoco(scene, seconds: float):
+    """(mj_step RK4 for `seconds`, ""), or (None, why not)."""
     import mujoco
     if scene.friction is not None or scene.joint_limits is not None:
         return None, "soft friction/limits"
@@ -132,7 +156,7 @@ def time_mujoco(scene, seconds: float, repeat: int):
         mujoco_peer.reset(model, data, scene, ctrl)
         for _ in range(steps):
             step(model, data)
-    return fastest(run, repeat), ""
+    return run, ""
 
 
 def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
@@ -143,11 +167,14 @@ def presets_table(seconds: float, repeat: int, only=None) -> list[str]:
              f"best of {repeat}", head, "-" * len(head)]
     for name in only or preset_names():
         scene = load_scene(name)
-        py, _, _ = time_run(scene, seconds, repeat, False)
-        fast, path, first = time_run(scene, seconds, repeat, True)
-        off, _, _ = time_run(scene.replace(estimate="off", tolerance=0.0), seconds, repeat, True)
-        limit = time_limit(scene, seconds, repeat)
-        theirs, why = time_mujoco(scene, seconds, repeat)
+        compiled_run, path, first = prepared_run(scene, seconds, True)
+        mujoco_run, why = prepared_mujoco(scene, seconds)
+        best = interleaved({     # in rounds: the ratios within a row under the same load
+            "python": prepared_run(scene, seconds, False)[0], "compiled": compiled_run,
+            "off": prepared_run(scene.replace(estimate="off", tolerance=0.0), seconds, True)[0],
+            "limit": prepared_limit(scene, seconds), "mujoco": mujoco_run}, repeat)
+        py, fast, off, limit, theirs = (best[k] for k in ("python", "compiled", "off", "limit",
+                                                           "mujoco"))
         steps = scene.steps_for(seconds)
         per = lambda t, w=9: f"{t / seconds * 1e6:>{w}.0f}" if t is not None else f"{'-':>{w}}"
         rate = lambda t, w=9: f"{steps / t:>{w}.3g}" if t is not None else f"{'':>{w}}"
