@@ -5,10 +5,11 @@ Local error (benchmarks/bench_tolerance.py, test/physics/test_error_estimate.py)
 doubling on a schedule. A check takes the step (n equal sub-steps, bit for bit the plain
 step) and again as 2n half sub-steps; the difference x 2^p / (2^p - 1) is the step's
 local error at its end (where a stiff mode the plan's sub-steps damp has decayed), signed,
-for every state. A split step (n > 1) is taken again as ceil(n/2) coarser sub-steps
-instead where those are as stable (Accuracy.coarser): m sub-steps, not 2n. An embedded pair (dopri5) doubles the sub-steps its error control took
-(embedded.py). Checks come every FIRST_EVERY steps at first, then as often as the local
-error moves (shadow.py: up to every MAX_EVERY; at rest, every MAX_EVERY). Switching scenes
+for every state. A split step (n > 1) is taken again as m = ceil(n/2) coarser sub-steps
+instead where those are as stable (coarsened): m sub-steps, not 2n. An embedded pair
+(dopri5) doubles the sub-steps its error control took (embedded.py). Checks come every
+FIRST_EVERY steps at first, then as often as the local error moves (shadow.py: up to every
+MAX_EVERY; at rest, every MAX_EVERY). Switching scenes
 (events.py): a step with a located switch or an engaged compliant limit is checked, each
 piece doubled, the halves going on from their own state between switches (attempt).
 
