@@ -59,7 +59,7 @@ def to_diagnostic_array(data: DiagnosticData) -> msg.DiagnosticArray:
 
 def clock_listened(core: ArmSimCore, clock_writer) -> bool:
     """Whether a node listens on /clock (a use_sim_time peer), as lockstep asks (core.tick):
-    False outside lockstep, asking DDS nothing (a match count costs a tick ~3 µs)."""
+    False outside lockstep, asking DDS nothing (a match count is a DDS call every tick)."""
     values = core.config.values
     return values["lockstep"] and values["publish_clock"] and msg.matched(clock_writer) > 0
 

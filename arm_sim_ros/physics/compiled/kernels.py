@@ -182,6 +182,13 @@ def grown(new, half, D, k, summed):
 
 
 @njit(cache=True)
+def sized(new, e0, e1, e2, e3):
+    """accuracy.sized: (the step, its local error, its scaled error) of its states' errors."""
+    scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
+    return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
+
+
+@njit(cache=True)
 def doubled(state, h, n, K, G, factor, states, summed, D):
     """accuracy.Accuracy.doubled: (the step as n sub-steps, its local error, its scaled
     error), the signed local error of every state into G (Richardson: 2n half sub-steps).
@@ -210,8 +217,7 @@ def doubled(state, h, n, K, G, factor, states, summed, D):
             G[k] = G[k] + difference * factor
         else:
             G[k] = difference * factor
-    scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
-    return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
+    return sized(new, e0, e1, e2, e3)
 
 
 @njit(cache=True)
@@ -229,8 +235,7 @@ def checked(state, h, n, K, G, factor, states, base, stiff_below, orderf):
     for k in range(states):
         G[k] = (coarse[k] - new[k]) / ratio
     e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
-    scaled = bigger(bigger(bigger(e0, e1), e2 / (1.0 + abs(new[2]))), e3 / (1.0 + abs(new[3])))
-    return new, bigger(bigger(bigger(e0, e1), e2), e3), scaled
+    return sized(new, e0, e1, e2, e3)
 
 
 @njit(cache=True)
