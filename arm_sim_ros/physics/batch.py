@@ -19,7 +19,8 @@ from .compiled import build as compiled
 from .stepping import stability
 from .dynamics import build_dynamics
 from .effects import Damping, Gravity
-from .stepping.integrators import INTEGRATORS, step_for
+from .stepping.integrators import INTEGRATORS
+from .stepping.exponential import step_for
 from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
 from .simulator import Simulator
@@ -236,6 +237,7 @@ class Batch:
                          **{k: c if isinstance(c, float) else c[chunk]
                             for k, c in self._constants.items()})
         exec(self._code, namespace)
+        namespace["rhs"].response = namespace.get("response")   # (windings: exponential.py)
         return namespace["rhs"]
 
     def _advance_chunk(self, chunk: slice, steps: int) -> None:

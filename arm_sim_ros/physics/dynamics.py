@@ -39,6 +39,16 @@ CONSTRAINED_SOLVE = {
     (True, True): ["    a1 = 0.0; a2 = 0.0", "    lam1 = -f1; lam2 = -f2"],
 }
 FIXED = ("stuck", "lower", "upper")
+# How the accelerations answer a unit torque on each joint (g11, g12 = g21, g22): M⁻¹ as
+# SOLVE computes it, or the constrained mode's (a fixed joint answers none).
+RESPONSE = {
+    (False, False): ["    c = cos(q2)", "    m11 = A + TWO_B * c", "    m12 = D + B * c",
+                     "    l21 = m12 / m11", "    g22 = 1.0 / (M22 - l21 * m12)",
+                     "    g12 = -l21 * g22", "    g11 = 1.0 / m11 - l21 * g12"],
+    (True, False): ["    g11 = 0.0; g12 = 0.0; g22 = 1.0 / M22"],
+    (False, True): ["    g11 = 1.0 / (A + TWO_B * cos(q2)); g12 = 0.0; g22 = 0.0"],
+    (True, True): ["    g11 = 0.0; g12 = 0.0; g22 = 0.0"],
+}
 
 
 @dataclass
@@ -109,14 +119,29 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     drives = any(effect.drives for effect in effects)
     torque = ([f"def torque({signature}):"] + terms + ["    return t1, t2"] if drives else
               [f"def torque({signature}):", "    return 0.0, 0.0"])
-    source = "\n".join(lines) + "\n"
+    source = "\n".join(lines) + "\n" + response_source(effects)
     names = "+".join(e.name for e in effects) or "free"
     exec(compile(source, f"<rhs {label}, {names}>", "exec"), namespace)
+    namespace["rhs"].response = namespace.get("response")
     exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
                     namespace["torque"], command if command is not None else [0.0, 0.0],
                     tuple(rate for effect in effects for rate in effect.linear_decay()))
+
+
+def response_source(effects, fixed=(False, False)) -> str:
+    """response(q1, q2): each extra state's pull on the accelerations, (d a1/dx, d a2/dx) per
+    state, where it scales a joint torque (a winding's current: Effect.state_torques), 0
+    elsewhere; "" without such a state. The exponential step integrates it exactly with
+    the currents (stepping/exponential.py); in a mode a fixed joint answers none."""
+    torques = [t for effect in effects for t in effect.state_torques()]
+    if not any(torques):
+        return ""
+    pairs = [(f"{t[0]} * g11", f"{t[0]} * g12") if t and t[1] == 0 else
+             (f"{t[0]} * g12", f"{t[0]} * g22") if t else ("0.0", "0.0") for t in torques]
+    return "\n".join(["def response(q1, q2):", *RESPONSE[fixed],
+                      f"    return {', '.join(v for pair in pairs for v in pair)},"]) + "\n"
 
 
 def body(effects, mode=None) -> list[str]:
@@ -163,6 +188,8 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     channels = [c.rate for c in merged_channels(dynamics.active)]
     returned = ["a1", "a2"] + rates(dynamics.active) + channels
     rhs = "\n".join([f"def rhs({signature}):"] + lines + ["    return " + ", ".join(returned)])
+    if response_source(dynamics.active, fixed):      # the exponential step's (windings)
+        rhs += "\n" + response_source(dynamics.active, fixed)
     source = "\n".join([rhs, f"def probe({signature}):"] + lines
                        + ["    return " + ", ".join(["lam1", "lam2"] + list(guards)) + ","]) + "\n"
     terms = stage_terms(dynamics.active, mode)
@@ -183,6 +210,7 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
     namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
+    namespace["rhs"].response = namespace.get("response")
     namespace["rhs"].guards_source = guards_source if guards else ""
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 

@@ -24,7 +24,8 @@ from .switching.events import switching as switching_for
 from .dynamics import book_entries, build_dynamics
 from .effects import servo
 from . import sensing
-from .stepping.integrators import INTEGRATORS, step_for
+from .stepping.integrators import INTEGRATORS
+from .stepping.exponential import step_for
 from .scene import Scene
 from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle

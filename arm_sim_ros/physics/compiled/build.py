@@ -32,7 +32,7 @@ from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
 from . import cache
-from ..stepping import integrators
+from ..stepping import exponential
 from .kernels import KERNELS
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
 from ..model import MAX_ANGLE
@@ -129,6 +129,7 @@ def step_source(step, names) -> str:
     at y: a check's step and its first half share them, the same numbers computed once)."""
     source = step.source.replace("def step(f, y, h):", "def step(y, h, K):\n"
                                  + "\n".join(_reads(names)))
+    source = source.replace("f.response(q1, q2)", "response(q1, q2, K)")   # (exponential.py)
     given = re.sub(r"= f\(([^)]*)\)", "= first", source.replace(
         "def step(y, h, K):", "def step_from(y, h, K, first):"), count=1)
     return "\n@njit(cache=True)\n".join(
@@ -199,14 +200,14 @@ def module_source(dynamics, step, rhs=None, guards=""):
                    and not isinstance(values[n], bool))
     lines = ["from math import ceil, cos, exp, isfinite, sin", "from numba import njit, prange", ""]
     if "COEFFICIENTS" in step.source:    # the exponential step's coefficients, compiled too
-        lines += [f"PHI_SERIES = {integrators.PHI_SERIES!r}",
-                  "@njit(cache=True)\n" + inspect.getsource(integrators.phi),
-                  "@njit(cache=True)\n" + inspect.getsource(integrators.exponential_rk4),
+        lines += [f"PHI_SERIES = {exponential.PHI_SERIES!r}",
+                  "@njit(cache=True)\n" + inspect.getsource(exponential.phi),
+                  "@njit(cache=True)\n" + inspect.getsource(exponential.exponential_rk4),
                   "COEFFICIENTS = exponential_rk4"]
     width = 4 + len(dynamics.extra) + len(dynamics.channels)
     energy = energy_source(dynamics)
-    for function in (rhs_source(rhs, names), step_source(step, names)):
-        lines += ["@njit(cache=True)", function]
+    # the rhs (and beside it, with windings, its response: dynamics.response_source)
+    lines += [functions_source(rhs, names), "@njit(cache=True)", step_source(step, names)]
     lines.append(energy[0] if energy else NO_ENERGY)
     fill = dict(items=", ".join(f"y[{k}]" for k in range(width)),
                 slopes=", ".join(f"state[{k}]" for k in range(4 + len(dynamics.extra))),

@@ -184,6 +184,12 @@ class Effect:
         """Energy it stores at configuration q and its extra states, counted in E."""
         return 0.0
 
+    def state_torques(self) -> tuple:
+        """Per extra state: (the constant it is multiplied by, joint 0 or 1) where the state
+        times that constant is a joint torque (a winding's current: k N), else None
+        (dynamics.response_source)."""
+        return (None,) * len(self.state)
+
     def lowest_stored_energy(self, arm) -> float:
         """A lower bound of stored_energy over every state (0: it stores none or >= 0):
         energy above it can be set in motion, wherever the effect puts its zero."""

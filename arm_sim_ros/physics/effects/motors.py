@@ -151,6 +151,10 @@ class Motors(Effect):
         exponential RK4 (integrators.py) where the scene's method is rk4."""
         return tuple(r / l for r, l in zip(self.resistance, self.inductance)) if self.windings else ()
 
+    def state_torques(self) -> tuple:
+        """The joints receive k N i: the exponential step couples them exactly."""
+        return (("KN1", 0), ("KN2", 1)) if self.windings else ()
+
     def coupling(self, arm) -> tuple:
         """((R/L, (kN)² Λ / L) per winding): the pole and the squared frequency at which
         winding and inertia exchange energy, of the linear test problem the stability plan

@@ -19,8 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from functools import lru_cache
-from math import exp, lcm, nan
+from math import lcm, nan
 
 F = Fraction
 
@@ -142,7 +141,7 @@ DEFAULT_RTOL = 1e-8
 DEFAULT_ATOL = 1e-10
 
 
-def _combination(base: str | None, coefficients, terms) -> str:
+def combination(base: str | None, coefficients, terms) -> str:
     """`base + h * (n1*k1 + n2*k2 ...) / den` with exact integer numerators."""
     pairs = [(F(c), k) for c, k in zip(coefficients, terms) if c != 0]
     if not pairs:
@@ -158,18 +157,18 @@ def _combination(base: str | None, coefficients, terms) -> str:
     return head + total + (f" / {den}.0" if den != 1 else "")
 
 
-def _state(extra: int, channels: int) -> tuple:
+def state_names(extra: int, channels: int) -> tuple:
     """State entry names: angles, velocities, an effect's extra states, channels."""
     return (MECHANICAL + tuple(f"x{k}" for k in range(extra))
             + tuple(f"w{j}" for j in range(channels)))
 
 
-def _slopes(extra: int, channels: int) -> list:
+def slope_names(extra: int, channels: int) -> list:
     return (["v1", "v2", "a1", "a2"] + [f"xd{k}" for k in range(extra)]
             + [f"r{j}" for j in range(channels)])
 
 
-def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool,
+def stage_lines(tableau: ButcherTableau, channels: int, first_given: bool,
                  extra: int = 0) -> list[str]:
     """Stage inputs and f calls, skipping whatever no weight uses."""
     evaluated = tableau.evaluated_stages()
@@ -184,11 +183,11 @@ def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool,
                 continue
             rows = tableau.pos_a if is_position else tableau.a
             names.append(f"{stage}_{i}")
-            inputs.append(_combination(x, rows[i], [f"{slope}_{j}" for j in range(i)]))
+            inputs.append(combination(x, rows[i], [f"{slope}_{j}" for j in range(i)]))
         if i in evaluated:   # extra states (winding currents...) are read only where f is
             for k in range(extra):
                 names.append(f"e{k}_{i}")
-                inputs.append(_combination(f"x{k}", tableau.a[i], [f"xd{k}_{j}" for j in range(i)]))
+                inputs.append(combination(f"x{k}", tableau.a[i], [f"xd{k}_{j}" for j in range(i)]))
         if names:
             lines.append(f"    {', '.join(names)} = {', '.join(inputs)}")
         if i in evaluated and not (first_given and i == 0):
@@ -199,13 +198,13 @@ def _stage_lines(tableau: ButcherTableau, channels: int, first_given: bool,
     return lines
 
 
-def _final(tableau: ButcherTableau, channels: int, position_b, b, extra: int = 0) -> list[str]:
+def final_terms(tableau: ButcherTableau, channels: int, position_b, b, extra: int = 0) -> list[str]:
     """The weighted sums of the slopes for each state entry (base None: the increment only)."""
     return [(position_b if n < 2 else b, x, [f"{k}_{j}" for j in range(tableau.stages)])
-            for n, (x, k) in enumerate(zip(_state(extra, channels), _slopes(extra, channels)))]
+            for n, (x, k) in enumerate(zip(state_names(extra, channels), slope_names(extra, channels)))]
 
 
-def _exec(source: str, name: str, namespace: dict):
+def exec_source(source: str, name: str, namespace: dict):
     exec(compile(source, name, "exec"), namespace)
     return namespace
 
@@ -218,14 +217,14 @@ def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAU
     matter for embedded pairs."""
     if tableau.adaptive:
         return _compile_adaptive(tableau, channels, rtol, atol, extra)
-    state = _state(extra, channels)
+    state = state_names(extra, channels)
     lines = ["def step(f, y, h):", f"    {', '.join(state)}, = y"]
-    lines += _stage_lines(tableau, channels, first_given=False, extra=extra)
-    final = [_combination(x, w, terms)
-             for w, x, terms in _final(tableau, channels, tableau.pos_b, tableau.b, extra)]
+    lines += stage_lines(tableau, channels, first_given=False, extra=extra)
+    final = [combination(x, w, terms)
+             for w, x, terms in final_terms(tableau, channels, tableau.pos_b, tableau.b, extra)]
     lines.append(f"    return ({', '.join(final)},)")
     source = "\n".join(lines) + "\n"
-    step = _exec(source, f"<{tableau.name} step, {extra} extra, {channels} channels>", {})["step"]
+    step = exec_source(source, f"<{tableau.name} step, {extra} extra, {channels} channels>", {})["step"]
     step.source = source
     return step
 
@@ -240,26 +239,26 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
     RMS error norm scaled by atol + rtol |y|; the controller around it is a plain loop."""
     if not (rtol > 0 and atol > 0):
         raise ValueError(f"{tableau.name}: rtol and atol must be positive, got {rtol}, {atol}")
-    state = _state(extra, channels)
-    first = [f"{k}_0" for k in _slopes(extra, channels)[2:]]
+    state = state_names(extra, channels)
+    first = [f"{k}_0" for k in slope_names(extra, channels)[2:]]
     last = tableau.stages - 1
     lines = [f"def attempt(f, {', '.join(state)}, h, {', '.join(first)}):"]
-    lines += _stage_lines(tableau, channels, first_given=True, extra=extra)
+    lines += stage_lines(tableau, channels, first_given=True, extra=extra)
     error_weights = [b - e for b, e in zip(tableau.b, tableau.embedded_b)]
     squares = []
-    for (w, x, terms), (ew, _, _) in zip(_final(tableau, channels, tableau.pos_b, tableau.b, extra),
-                                         _final(tableau, channels, error_weights, error_weights,
+    for (w, x, terms), (ew, _, _) in zip(final_terms(tableau, channels, tableau.pos_b, tableau.b, extra),
+                                         final_terms(tableau, channels, error_weights, error_weights,
                                                 extra)):
-        lines.append(f"    n_{x} = {_combination(x, w, terms)}")
-        lines.append(f"    d_{x} = {_combination(None, ew, terms)}")
+        lines.append(f"    n_{x} = {combination(x, w, terms)}")
+        lines.append(f"    d_{x} = {combination(None, ew, terms)}")
         lines.append(f"    e_{x} = d_{x} / (ATOL + RTOL * max(abs({x}), abs(n_{x})))")
         squares.append(f"e_{x} * e_{x}")
-    outputs = [f"{k}_{last}" for k in _slopes(extra, channels)[2:]]
+    outputs = [f"{k}_{last}" for k in slope_names(extra, channels)[2:]]
     lines.append(f"    return ({', '.join(f'n_{x}' for x in state)},), "
                  f"({', '.join(outputs)},), sqrt(({' + '.join(squares)}) / {len(state)}.0), "
                  f"max({', '.join(f'abs(d_{x})' for x in state[:4 + extra])})")
     source = "\n".join(lines) + "\n"
-    namespace = _exec(source, f"<{tableau.name} attempt, {channels} channels>",
+    namespace = exec_source(source, f"<{tableau.name} attempt, {channels} channels>",
                       {"RTOL": float(rtol), "ATOL": float(atol), "sqrt": __import__("math").sqrt})
     attempt = namespace["attempt"]
     exponent = -1.0 / (min(tableau.order, tableau.embedded_order) + 1)
@@ -296,103 +295,8 @@ def _compile_adaptive(tableau: ButcherTableau, channels: int, rtol: float, atol:
     return step
 
 
-# --- Exponential RK4: stiff linear decays (winding currents) integrated exactly ------------
-#
-# An extra state x with x' = -lam x + N(s) (a winding: lam = R/L, N = (V - k N q̇)/L) is
-# advanced by an exponential Runge-Kutta method (Hochbruck & Ostermann, Acta Numerica 2010,
-# eq. 2.22 with Krogstad's stages): stage k = e^(c z) x + h sum a(z) N, z = -h lam, with
-# weights of the phi functions of z. lam -> 0 gives back classical RK4, so the mechanics
-# and the books keep RK4's weights from the same stages; the pole -lam is exact for any h
-# (a winding with L/R << h needs no sub-steps, and decays as it should: passive).
-
-PHI_SERIES = 0.5     # |z| below this: the phi functions by their series (no cancellation)
-
-
-def phi(z: float):
-    """(e^z, phi1(z), phi2(z), phi3(z)) with phi_k(z) = sum_n z^n / (n + k)!."""
-    if z > -PHI_SERIES:
-        p3, term, power = 0.0, 1.0, 1.0
-        for n in range(3, 20):       # 1/n! ... |z|^17/20! < 1e-23 at |z| = 0.5
-            term /= n if n > 3 else 6.0
-            p3 = p3 + term * power
-            power = power * z        # z^(n-3) by products: pow differs in numba and libm
-        p2 = 0.5 + z * p3
-        p1 = 1.0 + z * p2
-        return 1.0 + z * p1, p1, p2, p3
-    e = exp(z)
-    p1 = (e - 1.0) / z
-    p2 = (p1 - 1.0) / z
-    return e, p1, p2, (p2 - 0.5) / z
-
-
-def exponential_rk4(z: float):
-    """(e^(z/2), e^z, a21, a31, a32, a41, a43, b1, b2, b3, b4) of the exponential RK4 for
-    the linear part z = -h lam (a42 = 0); z = 0: classical RK4's coefficients."""
-    e2, h1, h2, _ = phi(0.5 * z)
-    e, p1, p2, p3 = phi(z)
-    return (e2, e, 0.5 * h1, 0.5 * h1 - h2, h2, p1 - 2.0 * p2, 2.0 * p2,
-            p1 - 3.0 * p2 + 4.0 * p3, 2.0 * p2 - 4.0 * p3, 2.0 * p2 - 4.0 * p3, 4.0 * p3 - p2)
-
-
-# Stage inputs of the linear state k at stages 1-3 and its update (names of the tuple above)
-_EXP_STAGES = (("E2", ("A21",)), ("E2", ("A31", "A32")), ("E1", ("A41", None, "A43")))
-_EXP_NAMES = ("E2", "E1", "A21", "A31", "A32", "A41", "A43", "B1", "B2", "B3", "B4")
-
-
-def exponential_step_source(channels: int, extra: int, name: str = "step") -> str:
-    """The straight-line source of the exponential RK4 step (step(f, y, h); reads the
-    decay rates LAM0, LAM1 ... and COEFFICIENTS = exponential_rk4 from its globals)."""
-    state = _state(extra, channels)
-    lines = [f"def {name}(f, y, h):", f"    {', '.join(state)}, = y"]
-    for k in range(extra):   # (the stages' mechanics are RK4's: its tableau's lines)
-        lines.append(f"    {', '.join(f'{c}_{k}' for c in _EXP_NAMES)} = COEFFICIENTS(-h * LAM{k})")
-    mechanics = [line for line in _stage_lines(RK4, channels, first_given=False)
-                 if "= f(" not in line]
-    outputs = lambda i: ([f"a1_{i}", f"a2_{i}"] + [f"xd{k}_{i}" for k in range(extra)]
-                         + [f"r{j}_{i}" for j in range(channels)])
-    for i in range(4):
-        lines.append(mechanics[i])
-        for k in range(extra):
-            if i == 0:
-                lines.append(f"    e{k}_0 = x{k}")
-            else:
-                exp_name, weights = _EXP_STAGES[i - 1]
-                terms = " + ".join(f"{w}_{k} * n{k}_{j}" for j, w in enumerate(weights) if w)
-                lines.append(f"    e{k}_{i} = {exp_name}_{k} * x{k} + h * ({terms})")
-        arguments = [f"p1_{i}", f"p2_{i}", f"v1_{i}", f"v2_{i}"] + [f"e{k}_{i}" for k in range(extra)]
-        lines.append(f"    {', '.join(outputs(i))}, = f({', '.join(arguments)})")
-        for k in range(extra):      # the nonlinear part N = x' + lam x at the stage
-            lines.append(f"    n{k}_{i} = xd{k}_{i} + LAM{k} * e{k}_{i}")
-    final = [_combination(x, w, terms)
-             for w, x, terms in _final(RK4, channels, RK4.pos_b, RK4.b, extra)]
-    for k in range(extra):
-        final[4 + k] = (f"E1_{k} * x{k} + h * (B1_{k} * n{k}_0 + B2_{k} * n{k}_1 "
-                        f"+ B3_{k} * n{k}_2 + B4_{k} * n{k}_3)")
-    lines.append(f"    return ({', '.join(final)},)")
-    return "\n".join(lines) + "\n"
-
-
 def integrates_decay_exactly(tableau: ButcherTableau) -> bool:
     """Whether the step of `tableau` integrates the extra states' linear decays exactly
-    (the exponential RK4); other methods step them like the rest (and sub-step for them)."""
+    (the exponential RK4, exponential.py); other methods step them like the rest (and
+    sub-step for them)."""
     return tableau is EXPONENTIAL_RK4
-
-
-def step_for(tableau: ButcherTableau, channels: int = 0, decay=(), **tolerances):
-    """The step of `tableau` for a state with the extra states' linear `decay` rates."""
-    if integrates_decay_exactly(tableau) and any(decay):
-        return compile_exponential_step(channels, decay)
-    return compile_step(tableau, channels, extra=len(decay), **tolerances)
-
-
-def compile_exponential_step(channels: int, decay):
-    """step(f, y, h) as compile_step(RK4 ...), with the extra states x_k whose rates
-    f returns integrated exponentially at their linear decay rates `decay` (1/s, >= 0)."""
-    source = exponential_step_source(channels, len(decay))
-    namespace = {f"LAM{k}": float(lam) for k, lam in enumerate(decay)}
-    namespace["COEFFICIENTS"] = lru_cache(maxsize=64)(exponential_rk4)  # h repeats: computed once
-    step = _exec(source, f"<exponential rk4 step, {len(decay)} linear, {channels} channels>",
-                 namespace)["step"]
-    step.source, step.decay = source, tuple(decay)
-    step.constants = {k: v for k, v in namespace.items() if k.startswith("LAM")}
-    return step

@@ -24,8 +24,9 @@ from fractions import Fraction
 from functools import lru_cache
 from math import ceil, cos, hypot, pi, sin
 
-from .integrators import (EXPONENTIAL_RK4, INTEGRATORS, RK4, ButcherTableau, exponential_rk4,
+from .integrators import (EXPONENTIAL_RK4, INTEGRATORS, RK4, ButcherTableau,
                           integrates_decay_exactly)
+from .exponential import linear_step
 from ..model import ArmParameters, StepRefused, mass_matrix
 
 # Sub-steps aim at this fraction of the limit, d h_sub Lambda = 1.0: there R(-1) = 0.375 is
@@ -178,21 +179,9 @@ def substepping(step, substeps: int, stiff: str = "damping"):
 
 def exponential_radius(x: float, p: float, d: float) -> float:
     """Spectral radius of one exponential RK4 step (h = 1) of the winding's linear test
-    problem i' = -x i - sqrt(p) u, u' = sqrt(p) i - d u: the pole x exact, the coupling
-    (winding <-> inertia, squared frequency p) and the other decays d explicit."""
-    e2, e, a21, a31, a32, a41, a43, b1, b2, b3, b4 = exponential_rk4(-x)
-    w = p ** 0.5
-    columns = []
-    for i0, u0 in ((1.0, 0.0), (0.0, 1.0)):
-        n = [(-w * u0, w * i0 - d * u0)]                  # (N, u') of each stage
-        for i_k, u_k in ((e2 * i0, u0), (e2 * i0, u0), (e * i0, u0)):
-            k = len(n)
-            i_k += (a21 * n[0][0] if k == 1 else a31 * n[0][0] + a32 * n[1][0] if k == 2
-                    else a41 * n[0][0] + a43 * n[2][0])
-            u_k += 0.5 * n[k - 1][1] if k < 3 else n[2][1]
-            n.append((-w * u_k, w * i_k - d * u_k))
-        columns.append((e * i0 + b1 * n[0][0] + b2 * n[1][0] + b3 * n[2][0] + b4 * n[3][0],
-                        u0 + (n[0][1] + 2.0 * n[1][1] + 2.0 * n[2][1] + n[3][1]) / 6.0))
+    problem i' = -x i - sqrt(p) u, u' = sqrt(p) i - d u: the pole x and the torque sqrt(p) i
+    exact (exponential.py), the back-EMF and the other decays d explicit."""
+    columns = [linear_step(x, p ** 0.5, d, i0, u0) for i0, u0 in ((1.0, 0.0), (0.0, 1.0))]
     (m11, m21), (m12, m22) = columns
     half_trace, det = 0.5 * (m11 + m22), m11 * m22 - m12 * m21
     disc = half_trace * half_trace - det
