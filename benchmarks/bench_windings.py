@@ -1,18 +1,24 @@
 """geared_arm's windings, rk4 with its planned sub-steps against exponential_rk4 (none):
 the order in the mechanics against test_effects' independent first-principles reference,
 the energy books, the tolerance's sub-steps and the error against a tight-tolerance run,
-and cost per simulated second on the pure-Python and the compiled path. Prints tables;
-never pass/fail. `--dcmotor` adds bench_speed's windings table (MuJoCo's first-order
-dcmotor at equal h; needs the bench extra); `--linear-parts` a study of the exponential
-step with more of the winding's coupling in its exactly integrated part (errors only: it
-takes scipy's expm per step).
+and cost per simulated second on the pure-Python and the compiled path; stiff windings
+(L/R 10 µs to 1 ms, no method named, beside rk4 named): error against the reference on
+Radau and price, with `--base DIR` another checkout's price beside (main's), timed in the
+same rounds. Prints tables; never pass/fail. `--dcmotor` adds bench_speed's windings
+table (MuJoCo's first-order dcmotor at equal h; needs the bench extra); `--linear-parts`
+a study of the exponential step with more of the winding's coupling in its exactly
+integrated part (errors only: it takes scipy's expm per step).
 
-    nice python benchmarks/bench_windings.py [--repeat 3] [--dcmotor] [--linear-parts]
+    nice python benchmarks/bench_windings.py [--repeat 3] [--base DIR] [--tables stiff,...]
+        [--dcmotor] [--linear-parts]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -238,22 +244,129 @@ def linear_parts(seconds: float = 0.2) -> list[str]:
     return lines
 
 
+# --- Stiff windings: accuracy and price by L/R (issue 47) -----------------------------------
+
+STIFF = ((1e-5, ""), (1e-5, "rk4"), (1e-4, ""), (1e-4, "rk4"), (0.301e-3 / 0.573, ""),
+         (0.301e-3 / 0.573, "rk4"), (1e-3, ""), (1e-3, "rk4"))
+# The arm and its windings at L/R = `constant` (None: the gears alone, no windings), moving
+# and commanded, no clamps (the reference has no events), tolerance 0 (the methods alone).
+# Written with the public API only: `--base` runs it in another checkout too.
+SCENE = """
+from arm_sim_ros.physics.scene import load_scene
+
+def stiff_scene(constant, integrator):
+    base = load_scene("geared_arm").replace(friction=None, joint_limits=None, tolerance=0.0,
+                                            effort_limits=None, initial_velocities=(0.5, -1.0),
+                                            integrator=integrator)
+    motors = {k: v for k, v in base.motors.items() if k != "voltage_limit"}
+    if constant is None:
+        return base.replace(motors={k: motors[k] for k in ("gear_ratio", "rotor_inertia")})
+    motors["inductance"] = [constant * r for r in motors["resistance"]]
+    return base.replace(motors=motors)
+"""
+TIMING = SCENE + """
+import json, sys, time
+from arm_sim_ros.physics.simulator import Simulator
+rows, seconds, command = json.loads(sys.argv[1])
+out = []
+for constant, integrator in rows:
+    sim = Simulator(stiff_scene(constant, integrator))
+    sim.set_command(*command)
+    sim.run(seconds)            # compiles, or loads the kernels, once
+    sim.reset()
+    sim.set_command(*command)
+    start = time.process_time()
+    sim.run(seconds)
+    out.append((time.process_time() - start) / seconds * 1e6)
+print(json.dumps(out))
+"""
+STIFF_COMMAND = (10.0, -4.0)
+
+
+def _prices(checkout: Path, rows, seconds: float, fast: bool) -> list:
+    """µs per simulated second of each row, one run each, in a process of `checkout`'s."""
+    env = dict(os.environ, PYTHONPATH=str(checkout), ARM_SIM_COMPILED="1" if fast else "0")
+    done = subprocess.run([sys.executable, "-c", TIMING, json.dumps([rows, seconds,
+                                                                     STIFF_COMMAND])],
+                          cwd=checkout, env=env, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def stiff_table(seconds: float, long: float, repeat: int, base: Path | None) -> list[str]:
+    """Per L/R, no method named (exponential_rk4 where the windings are stiff) beside rk4
+    named: the plan's sub-steps, the largest |q| and |q, qd| error over `seconds` against
+    FirstPrinciples on Radau (rtol 1e-12), and µs per simulated second of Simulator.run,
+    pure Python over `seconds`, compiled over `long`, best of `repeat` rounds, each row
+    once a round in a process of its checkout (with `base`, that one's too, in turn)."""
+    from physics.test_windings_exact import errors_against_radau
+    namespace = {}
+    exec(SCENE, namespace)
+    stiff_scene = namespace["stiff_scene"]
+    rows = [(None, "")] + list(STIFF)
+    checkouts = {"this": HERE.parent} | ({"base": base.resolve()} if base else {})
+    best = {(label, fast): [math.inf] * len(rows) for label in checkouts for fast in (0, 1)}
+    for _ in range(repeat):
+        for label, checkout in checkouts.items():
+            for fast, span in ((0, seconds), (1, long)):
+                if fast and not compiled.available():
+                    continue
+                prices = _prices(checkout, rows, span, bool(fast))
+                best[label, fast] = [min(a, b) for a, b in zip(best[label, fast], prices)]
+    head = (f"geared arm (no clamps, friction or limits), h = 1 ms, tolerance 0, commanded "
+            f"{STIFF_COMMAND} N m on gravity compensation from qd0 = (0.5, -1.0): largest "
+            f"error over {seconds:g} s against the first-principles equations on Radau; "
+            f"µs per simulated second of Simulator.run, python {seconds:g} s, compiled "
+            f"{long:g} s runs, best of {repeat} rounds" + (", base: another checkout's, "
+                                                           "the same rounds" if base else ""))
+    lines = [head, f"{'L/R':>9} {'named':>6} {'method':>16} {'sub':>4} {'|q err|':>8} "
+             f"{'|qd err|':>8} {'python':>8} {'compiled':>9} {'of gears':>8}"
+             + (f" {'base py':>8} {'base comp':>9} {'this÷base':>9}" if base else "")]
+    for k, (constant, integrator) in enumerate(rows):
+        scene = stiff_scene(constant, integrator)
+        if constant is None:
+            errors, what = f"{'-':>8} {'-':>8}", "gears"
+        else:
+            q, state = errors_against_radau(scene, STIFF_COMMAND, seconds)
+            errors, what = f"{q:8.1e} {state:8.1e}", f"{constant * 1e6:7.0f} µs"
+        py, fast = best["this", 0][k], best["this", 1][k]
+        line = (f"{what:>9} {integrator or '-':>6} {scene.method:>16} "
+                f"{simulator(scene, False).substeps:>4} {errors} {py:8.0f} {fast:9.0f} "
+                f"{fast / best['this', 1][0]:7.2f}x")
+        if base:
+            line += (f" {best['base', 0][k]:8.0f} {best['base', 1][k]:9.0f} "
+                     f"{fast / best['base', 1][k]:8.2f}x")
+        lines.append(line)
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=1.0)
+    parser.add_argument("--long", type=float, default=20.0,
+                        help="simulated s of the stiff table's compiled runs")
+    parser.add_argument("--base", type=Path, help="another checkout (main's): its price beside")
+    parser.add_argument("--tables", default="convergence,books,tolerance,stiff",
+                        help="of convergence, books, tolerance, stiff")
     parser.add_argument("--dcmotor", action="store_true")
     parser.add_argument("--linear-parts", action="store_true",
                         help="the study of what else the exact part could hold (scipy)")
     args = parser.parse_args()
-    tables = [convergence(), books_by_channel(), under_tolerance(args.seconds, args.repeat)]
+    chosen = args.tables.split(",")
+    tables = {"convergence": convergence, "books": books_by_channel,
+              "tolerance": lambda: under_tolerance(args.seconds, args.repeat),
+              "stiff": lambda: stiff_table(args.seconds, args.long, args.repeat, args.base)}
+    for name in chosen:
+        if name not in tables:
+            parser.error(f"--tables: {name!r} is none of {', '.join(tables)}")
+    chosen = [tables[name] for name in chosen]
     if args.linear_parts:
-        tables.append(linear_parts())
+        chosen.append(linear_parts)
     if args.dcmotor:
         from bench_speed import windings_table
-        tables.append(windings_table(args.repeat))
-    for table in tables:
-        print("\n".join(table) + "\n", flush=True)
+        chosen.append(lambda: windings_table(args.repeat))
+    for table in chosen:
+        print("\n".join(table()) + "\n", flush=True)
 
 
 if __name__ == "__main__":
