@@ -9,7 +9,7 @@ import pytest
 
 from arm_sim_ros.physics.stepping.stability import substepping
 from arm_sim_ros.physics.trust import guard
-from arm_sim_ros.physics.trust.accuracy import DEFAULT_MAX_SUBSTEPS
+from arm_sim_ros.physics.trust.accuracy import DEFAULT_MAX_SUBSTEPS, THREE_LEVELS
 from arm_sim_ros.physics.trust.controller import proposed
 from arm_sim_ros.physics.scene import Scene, SceneError, load_scene
 from arm_sim_ros.physics.simulator import Simulator
@@ -187,33 +187,58 @@ def counted_rhs(sim):
     return f, calls
 
 
-@pytest.mark.parametrize("n", [2, 3, 4, 7])
-def test_a_split_step_is_checked_against_half_as_many_coarser_sub_steps(n):
-    """A step of n > 1 sub-steps is taken again as m = ceil(n/2) sub-steps, whose error is
-    (n/m)^4 times its own for rk4: its signed error is (coarse - step) / ((n/m)^4 - 1), at
-    the price of m sub-steps (2n halves before)."""
+@pytest.mark.parametrize("n", [2, 3, 4, 7, 11])
+def test_a_split_step_is_checked_against_half_as_many_again_finer_sub_steps(n):
+    """A step of 1 < n < THREE_LEVELS sub-steps is taken again as m = ceil(3n/2) sub-steps,
+    whose error is (n/m)^4 times its own for rk4: its signed error is (step - fine) /
+    (1 - (n/m)^4), at the price of m sub-steps (2n halves; ceil(n/2) coarser ones before,
+    whose estimate carried the next error term twice over: issue 47's spins)."""
     sim = Simulator(load_scene("release"))
     books, y, h = sim.accuracy, sim.state, sim.step_size
     f, calls = counted_rhs(sim)
     step, error, scaled, signed = books.measure(f, y, h, n)
-    m = (n + 1) // 2
-    coarse = substepping(sim._step, m)(sim._rhs, y, h)
+    m = -(-3 * n // 2)
+    fine = substepping(sim._step, m)(sim._rhs, y, h)
     assert step == substepping(sim._step, n)(sim._rhs, y, h)
-    assert signed == [(c - a) / ((n / m) ** 4 - 1.0) for a, c in zip(step[:4], coarse)]
+    assert signed == [(a - c) / (1.0 - (n / m) ** 4) for a, c in zip(step[:4], fine)]
     assert error == max(abs(e) for e in signed)
     assert calls[0] == 4 * (n + m)
 
 
-def test_a_check_at_one_sub_step_or_one_the_plan_needs_takes_the_halves():
-    """A single sub-step has no coarser one, and a plan's stability sub-steps may not be
-    halved (its step would not be stable): both are checked against 2n halves."""
+@pytest.mark.parametrize("n", [THREE_LEVELS, 13, 33])
+def test_a_step_of_many_sub_steps_is_checked_against_two_coarser_counts(n):
+    """From THREE_LEVELS on, against ceil(n/2) and ceil(n/3) sub-steps: their differences from
+    the step give both the leading error term and the next (C N^-4 + D N^-5), so the
+    estimate is the step's error to that order, at the price of 5n/6 sub-steps; exact for
+    errors of that form (checked on the weights)."""
+    sim = Simulator(load_scene("release"))
+    books, y, h = sim.accuracy, sim.state, sim.step_size
+    f, calls = counted_rhs(sim)
+    step, error, scaled, signed = books.measure(f, y, h, n)
+    m1, m2 = -(-n // 2), -(-n // 3)
+    one, two = (substepping(sim._step, m)(sim._rhs, y, h) for m in (m1, m2))
+    r1, r2 = n / m1, n / m2
+    det = (r1 ** 4 - 1.0) * (r2 ** 5 - 1.0) - (r1 ** 5 - 1.0) * (r2 ** 4 - 1.0)
+    w1, w2 = r2 ** 4 * (r2 - 1.0) / det, -(r1 ** 4) * (r1 - 1.0) / det
+    assert signed == [w1 * (a - b) + w2 * (c - b) for a, c, b in zip(one, two, step[:4])]
+    assert calls[0] == 4 * (n + m1 + m2)
+    for c, d in ((1.0, 0.0), (0.0, 1.0), (0.3, -2.0)):      # e(N) = c N^-4 + d N^-5
+        e = lambda count: c * count ** -4 + d * count ** -5
+        assert w1 * (e(m1) - e(n)) + w2 * (e(m2) - e(n)) == pytest.approx(e(n), rel=1e-12)
+
+
+def test_a_check_at_one_sub_step_or_where_the_plan_needs_them_takes_none_fewer():
+    """A single sub-step is checked against its 2 halves; a plan's stability sub-steps are
+    never checked against fewer than the plan asks (they would not be stable): against
+    finer ones."""
     sim = Simulator(load_scene("release"))
     f, calls = counted_rhs(sim)
     sim.accuracy.measure(f, sim.state, sim.step_size, 1)
     assert calls[0] == 4 * 3
-    stiff = Simulator(load_scene("damped_release").replace(damping=60.0))
+    stiff = Simulator(load_scene("damped_release").replace(damping=600.0))
     books = stiff.accuracy
-    assert books.base > 1
+    n = max(THREE_LEVELS, books.base + 1)
+    assert -(-n // 3) < books.base
     f, calls = counted_rhs(stiff)
-    books.measure(f, stiff.state, stiff.step_size, books.base + 1)
-    assert calls[0] == 4 * 3 * (books.base + 1)
+    books.measure(f, stiff.state, stiff.step_size, n)
+    assert calls[0] == 4 * (n + -(-3 * n // 2))

@@ -168,3 +168,24 @@ def test_stiff_windings_are_as_accurate_as_rk4_on_windings_it_need_not_sub_step(
     q, state = errors_against_radau(stiff, command, seconds)
     q_rk4, state_rk4 = errors_against_radau(plain, command, seconds)
     assert q <= 2.0 * q_rk4 and state <= state_rk4, (q, q_rk4, state, state_rk4)
+
+
+def test_the_currents_pull_on_the_joints_as_each_mode_lets_them():
+    """The step's coupling (f.response, dynamics.response_source) is the rhs's own
+    acceleration per ampere, mode by mode: M⁻¹kN where both joints move, none on a joint
+    friction holds, whose velocity then stays exactly 0 under the exponential step."""
+    sim = Simulator(load_scene("geared_arm"))
+    for _ in range(300):
+        sim.step()
+    assert sim.switching.mode[:2] == ("stuck", "stuck") and sim.state[2:4] == (0.0, 0.0)
+    y = (0.3, -0.8, 0.5, -1.0, 2.0, -1.5)
+    for mode, f in [(None, sim.dynamics.function)] + [
+            (m, sim.switching.functions(m)[0]) for m in (
+                ("free", "free", 0, 0, (0, 0, 0, 0)), ("stuck", "free", 0, 0, (0, 0, 0, 0)),
+                ("free", "stuck", 0, 0, (0, 0, 0, 0)), ("stuck", "stuck", 0, 0, (0, 0, 0, 0)))]:
+        pull = f.response(*y[:2])
+        for k in (0, 1):        # the accelerations are affine in each current
+            moved = list(y)
+            moved[4 + k] += 1.0
+            expected = [a - b for a, b in zip(f(*moved)[:2], f(*y)[:2])]
+            assert list(pull[2 * k:2 * k + 2]) == pytest.approx(expected, rel=1e-9, abs=1e-12), mode

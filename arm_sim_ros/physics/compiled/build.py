@@ -83,6 +83,7 @@ BOOKS_CONSTANTS = {**{n: getattr(controller, n) for n in ("KI", "KP", "KEEP", "S
                                                       "ROUNDING")},
                    **{n: getattr(guard, n) for n in ("CHECK_EVERY", "FLOOR", "BOOKS_FRACTION")},
                    "GIVE_UP": accuracy.GIVE_UP, "NO_GAIN": accuracy.NO_GAIN,
+                   "THREE_LEVELS": accuracy.THREE_LEVELS,
                    "MAX_ANGLE": MAX_ANGLE}
 STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
 

@@ -223,17 +223,28 @@ def doubled(state, h, n, K, G, factor, states, summed, D):
 @njit(cache=True)
 def checked(state, h, n, K, G, factor, states, base, stiff_below, orderf):
     """accuracy.Accuracy.measure: (the step as n sub-steps, its local error, its scaled
-    error), the signed local error of every state into G: against ceil(n/2) sub-steps
-    where accuracy.coarsened takes them (Richardson the other way), else 2n halves."""
-    m = (n + 1) // 2
-    if not (n > 1 and m >= base and not m < stiff_below):
+    error), the signed local error of every state into G: a split step against other
+    counts of its sub-steps as accuracy.compared takes them, else 2n halves."""
+    if n < 2:
         return doubled(state, h, n, K, G, factor, states, False, G)
+    m1, m2 = (n + 1) // 2, -(-n // 3)
     first = rhs({slopes}, K)
     new = substepped_from(state, h, n, K, first)
-    coarse = substepped_from(state, h, m, K, first)
-    ratio = (n / m) ** orderf - 1.0
-    for k in range(states):
-        G[k] = (coarse[k] - new[k]) / ratio
+    if n >= {THREE_LEVELS!r} and m2 >= base and not m2 < stiff_below:
+        r1, r2 = n / m1, n / m2
+        det = (r1 ** orderf - 1.0) * (r2 ** (orderf + 1.0) - 1.0) - (
+            r1 ** (orderf + 1.0) - 1.0) * (r2 ** orderf - 1.0)
+        w1, w2 = r2 ** orderf * (r2 - 1.0) / det, -(r1 ** orderf) * (r1 - 1.0) / det
+        one = substepped_from(state, h, m1, K, first)
+        two = substepped_from(state, h, m2, K, first)
+        for k in range(states):
+            G[k] = w1 * (one[k] - new[k]) + w2 * (two[k] - new[k])
+    else:
+        m = (3 * n + 1) // 2
+        fine = substepped_from(state, h, m, K, first)
+        ratio = 1.0 - (n / m) ** orderf
+        for k in range(states):
+            G[k] = (new[k] - fine[k]) / ratio
     e0, e1, e2, e3 = abs(G[0]), abs(G[1]), abs(G[2]), abs(G[3])
     return sized(new, e0, e1, e2, e3)
 
