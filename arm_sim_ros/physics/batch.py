@@ -237,7 +237,6 @@ class Batch:
                          **{k: c if isinstance(c, float) else c[chunk]
                             for k, c in self._constants.items()})
         exec(self._code, namespace)
-        namespace["rhs"].response = namespace.get("response")   # (windings: exponential.py)
         return namespace["rhs"]
 
     def _advance_chunk(self, chunk: slice, steps: int) -> None:

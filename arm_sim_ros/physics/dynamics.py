@@ -122,7 +122,6 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
     source = "\n".join(lines) + "\n" + response_source(effects)
     names = "+".join(e.name for e in effects) or "free"
     exec(compile(source, f"<rhs {label}, {names}>", "exec"), namespace)
-    namespace["rhs"].response = namespace.get("response")
     exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
@@ -133,15 +132,18 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
 def response_source(effects, fixed=(False, False)) -> str:
     """response(q1, q2): each extra state's pull on the accelerations, (d a1/dx, d a2/dx) per
     state, where it scales a joint torque (a winding's current: Effect.state_torques), 0
-    elsewhere; "" without such a state. The exponential step integrates it exactly with
-    the currents (stepping/exponential.py); in a mode a fixed joint answers none."""
+    elsewhere, set as the attribute `response` of the rhs defined before it (whoever runs
+    the source: a mode's, a Batch's arrays); "" without such a state. The exponential step
+    integrates it exactly with the currents (stepping/exponential.py); in a mode a fixed
+    joint answers none."""
     torques = [t for effect in effects for t in effect.state_torques()]
     if not any(torques):
         return ""
     pairs = [(f"{t[0]} * g11", f"{t[0]} * g12") if t and t[1] == 0 else
              (f"{t[0]} * g12", f"{t[0]} * g22") if t else ("0.0", "0.0") for t in torques]
     return "\n".join(["def response(q1, q2):", *RESPONSE[fixed],
-                      f"    return {', '.join(v for pair in pairs for v in pair)},"]) + "\n"
+                      f"    return {', '.join(v for pair in pairs for v in pair)},",
+                      "rhs.response = response   # the rhs it answers for carries it"]) + "\n"
 
 
 def body(effects, mode=None) -> list[str]:
@@ -210,7 +212,6 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
     namespace = dict(dynamics.function.__globals__)
     exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
     namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
-    namespace["rhs"].response = namespace.get("response")
     namespace["rhs"].guards_source = guards_source if guards else ""
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")
 

@@ -12,7 +12,8 @@ switch scipy's solve_ivp(events=...) locates; here it also records when.
 import numpy as np
 import pytest
 
-from arm_sim_ros.physics.stepping.integrators import INTEGRATORS, step_for
+from arm_sim_ros.physics.stepping.exponential import step_for
+from arm_sim_ros.physics.stepping.integrators import INTEGRATORS
 from arm_sim_ros.physics.scene import Scene, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.physics.stepping.stability import substepping
