@@ -65,16 +65,17 @@ def exponential_rk4(z: float):
             p2 - 3.0 * p3 + 4.0 * p4, 2.0 * p3 - 4.0 * p4, 2.0 * p3 - 4.0 * p4, 4.0 * p4 - p3)
 
 
-# The names of exponential_rk4's coefficients in the step's source, and per stage 1-3: the
-# current's (e^(cz), [a(z) by earlier stage]), the coupling's (divided differences), and RK4's
-# weights of the earlier stages' currents in the velocity (what the coupling replaces).
+# The names of exponential_rk4's coefficients in the step's source, and per stage 1-3 and
+# the step's end: the current's (e^(cz), [a(z) by earlier stage]), the coupling's (divided
+# differences), and RK4's quadrature of the stages' currents in the velocity (what the
+# coupling replaces).
 NAMES = ("E2", "E1", "A21", "A31", "A32", "A41", "A43", "B1", "B2", "B3", "B4",
          "DE2", "DE1", "D21", "D31", "D32", "D41", "D43", "DB1", "DB2", "DB3", "DB4")
-STAGES = ((("E2", ("A21",)), ("DE2", ("D21",)), (0.5,)),
-          (("E2", ("A31", "A32")), ("DE2", ("D31", "D32")), (0.0, 0.5)),
-          (("E1", ("A41", None, "A43")), ("DE1", ("D41", None, "D43")), (0.0, 0.0, 1.0)))
+STAGES = ((("E2", ("A21",)), ("DE2", ("D21",)), "0.5 * e{k}_0"),
+          (("E2", ("A31", "A32")), ("DE2", ("D31", "D32")), "0.5 * e{k}_1"),
+          (("E1", ("A41", None, "A43")), ("DE1", ("D41", None, "D43")), "e{k}_2"))
 FINAL = (("E1", ("B1", "B2", "B3", "B4")), ("DE1", ("DB1", "DB2", "DB3", "DB4")),
-         (1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0))
+         "(e{k}_0 + 2.0 * e{k}_1 + 2.0 * e{k}_2 + e{k}_3) / 6.0")
 
 
 def _integral(k: int, part) -> str:
@@ -85,17 +86,16 @@ def _integral(k: int, part) -> str:
     return f"{start}_{k} * x{k} + h * ({terms})"
 
 
-def _coupled(k: int, stage: str, coupling, rk4) -> str:
+def _coupled(k: int, stage: str, coupling, rk4: str) -> str:
     """The current's exact integral over the stage less RK4's quadrature of its stage values:
     what the velocity's linear coupling adds (s_k)."""
-    quadrature = " + ".join(f"{w!r} * e{k}_{j}" for j, w in enumerate(rk4) if w)
-    return f"    s{k}_{stage} = {_integral(k, coupling)} - ({quadrature})"
+    return f"    s{k}_{stage} = {_integral(k, coupling)} - {rk4.format(k=k)}"
 
 
-def _velocities(extra: int, stage: str, at: str) -> list[str]:
-    """v = v + h B0 s: the coupling's share of the velocities (at: the velocity names' stage)."""
-    return [f"    {v}{at} = {v}{at} + h * ({' + '.join(f'R{j}_{k} * s{k}_{stage}' for k in range(extra))})"
-            for j, v in ((1, "v1_"), (2, "v2_"))]
+def _velocities(extra: int, stage: str) -> list[str]:
+    """v = v + h B0 s: the coupling's share of the stage's velocities."""
+    pulls = lambda j: " + ".join(f"R{j}_{k} * s{k}_{stage}" for k in range(extra))
+    return [f"    v{j}_{stage} = v{j}_{stage} + h * ({pulls(j)})" for j in (1, 2)]
 
 
 def exponential_step_source(channels: int, extra: int, name: str = "step") -> str:
@@ -121,7 +121,7 @@ def exponential_step_source(channels: int, extra: int, name: str = "step") -> st
             lines.append(f"    e{k}_{i} = {_integral(k, current)}")
             lines.append(_coupled(k, str(i), coupling, rk4))
         if i and extra:
-            lines += _velocities(extra, str(i), str(i))
+            lines += _velocities(extra, str(i))
         arguments = [f"p1_{i}", f"p2_{i}", f"v1_{i}", f"v2_{i}"] + [f"e{k}_{i}" for k in range(extra)]
         lines.append(f"    {', '.join(outputs(i))}, = f({', '.join(arguments)})")
         for k in range(extra):      # the nonlinear part N = x' + lam x at the stage
