@@ -41,13 +41,16 @@ class Arm:
 class ArmNodes:
     """The `arm_node` fixture: nodes in lockstep over the wire, stopped after the test."""
 
-    def __init__(self, directory, traces: list):
+    def __init__(self, directory, traces: list, monkeypatch):
         self.directory, self.traces, self.nodes = directory, traces, []
+        self.monkeypatch = monkeypatch
 
     def __call__(self, scene: str = "release", parameters: dict | None = None, **options):
         from .wire import WireArm
         node = WireArm(scene, parameters, directory=self.directory, **options)
         self.nodes.append(node)
+        for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):   # rclpy.init() joins
+            self.monkeypatch.setenv(name, node.env[name])
         run = node.run
 
         def kept(seconds: float):
@@ -76,10 +79,12 @@ def arm(request):
 
 
 @pytest.fixture
-def arm_node(request, tmp_path):
+def arm_node(request, tmp_path, monkeypatch):
     """Start the node in lockstep on a private domain: `node = arm_node("release")`, then
-    your controller on `node.domain_id`, then `node.run(seconds)`."""
-    nodes = ArmNodes(tmp_path, request.node.stash.setdefault(EVIDENCE, []))
+    your controller on `node.domain_id` (for the test, this process's ROS_DOMAIN_ID and
+    ROS_AUTOMATIC_DISCOVERY_RANGE are the node's: rclpy.init() joins it), then
+    `node.run(seconds)`."""
+    nodes = ArmNodes(tmp_path, request.node.stash.setdefault(EVIDENCE, []), monkeypatch)
     yield nodes
     nodes.close()
 

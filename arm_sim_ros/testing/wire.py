@@ -63,50 +63,68 @@ def stamp_of(message) -> int:
 
 
 class WireArm:
-    """The node in lockstep in a subprocess, and what crosses the wire as a trace."""
+    """The node in lockstep in a subprocess (or one a launch started: attach), and what
+    crosses the wire as a trace."""
 
     def __init__(self, scene: str = "release", parameters: dict | None = None, *,
                  transport: str = "dds", directory=None, domain_id: int | None = None,
                  silence: float = SILENCE, name: str = "arm_sim"):
-        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-        from cyclonedds.sub import DataReader
-        from cyclonedds.topic import Topic
-        from ..node.wire import messages as msg
-        from ..tools.wire.sim_client import SimulationClient
-
-        self.domain_id = private_domain() if domain_id is None else domain_id
-        self.env, self.silence, self.scene = wire_env(self.domain_id), silence, scene
-        self.directory = Path(directory or ".")
+        domain_id = private_domain() if domain_id is None else domain_id
+        directory = Path(directory or ".")
         stem = next(f"{name}{n or ''}" for n in itertools.count()      # never replace one
-                    if not (self.directory / f"{name}{n or ''}.rrd").exists())
-        self.recording = self.directory / f"{stem}.rrd"
-        self.log_path = self.directory / f"{stem}.log"
-        values = {"scene": scene, "lockstep": True, "lockstep_wait": 0.0,
-                  "rerun_path": str(self.recording)} | dict(parameters or {})
-        self.publish_rate = float(values.get("publish_rate", 100.0))
+                    if not (directory / f"{name}{n or ''}.rrd").exists())
+        values = lockstep_parameters(scene, parameters) | {
+            "rerun_path": str(directory / f"{stem}.rrd")}
         # the fixture's participant first: the node's first state then has a reader
-        self.client = SimulationClient(self.domain_id, msg.discovery_config(self.env))
-        p = self.client.participant
-        deep = lambda t: msg.default_qos(t, depth=10_000)  # noqa: E731 (drained every DRAIN)
-        self.readers = {topic: DataReader(p, Topic(p, msg.ros_topic(topic), kind),
-                                              qos=deep(kind))
-                        for topic, kind in (("joint_states", msg.JointState),
-                                            ("arm_sim/true_joint_states", msg.JointState),
-                                            ("joint_commands", msg.JointState),
-                                            ("joint_torque_commands", msg.Float64MultiArray))}
-        self.states, self.truth, self.answers = {}, {}, {}
-        self._unstamped, self.log = [], open(self.log_path, "wb")
+        self._connect(domain_id, wire_env(domain_id), values, silence)
+        self.log_path = directory / f"{stem}.log"
+        self.log = open(self.log_path, "wb")
         command = [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", transport,
                    "--quiet", "--ros-args",
                    *itertools.chain.from_iterable(("-p", f"{k}:={ros_value(v)}")
                                                   for k, v in values.items())]
         self.process = subprocess.Popen(command, env=self.env, stdout=self.log,
                                         stderr=subprocess.STDOUT)
+        self._wait_for_node()
+
+    @classmethod
+    def attach(cls, parameters: dict | None = None, *, domain_id: int | None = None,
+               silence: float = SILENCE) -> "WireArm":
+        """The node a launch started (testing/launch.py) on this process's ROS_DOMAIN_ID
+        (or `domain_id`), with the `parameters` it was given (publish_rate, scene,
+        rerun_path: the energy books come from its recording, if it writes one)."""
+        from ..node.wire import messages as msg
+        arm = cls.__new__(cls)
+        domain_id = msg.domain_id_from_env() if domain_id is None else domain_id
+        arm._connect(domain_id, dict(os.environ), lockstep_parameters(
+            (parameters or {}).get("scene", "release"), parameters), silence)
+        arm.process, arm.log, arm.log_path = None, None, "the launch's output"
+        arm._wait_for_node()
+        return arm
+
+    def _connect(self, domain_id: int, env: dict, values: dict, silence: float) -> None:
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+        from ..node.wire import messages as msg
+        from ..tools.wire.sim_client import SimulationClient
+
+        self.domain_id, self.env, self.silence = domain_id, env, silence
+        self.scene, self.publish_rate = values["scene"], float(values.get("publish_rate", 100.0))
+        self.recording = Path(values["rerun_path"]) if values.get("rerun_path") else None
+        self.client = SimulationClient(domain_id, msg.discovery_config(env))
+        p = self.client.participant
+        deep = lambda t: msg.default_qos(t, depth=10_000)  # noqa: E731 (drained every DRAIN)
+        self.readers = {topic: DataReader(p, Topic(p, msg.ros_topic(topic), kind),
+                                          qos=deep(kind))
+                        for topic, kind in (("joint_states", msg.JointState),
+                                            ("arm_sim/true_joint_states", msg.JointState),
+                                            ("joint_commands", msg.JointState),
+                                            ("joint_torque_commands", msg.Float64MultiArray))}
+        self.states, self.truth, self.answers = {}, {}, {}
         self._replied = WaitSet(p)
         self._replied.attach(ReadCondition(self.client.services["step_simulation"].reader,
                                            SampleState.Any | ViewState.Any | InstanceState.Any))
-        self._wait_for_node()
-        self.client.pause()
 
     # -- running ----------------------------------------------------------------------------
 
@@ -115,7 +133,7 @@ class WireArm:
         whole run so far."""
         from cyclonedds.util import duration
         ticks = round(seconds * self.publish_rate)
-        last = max(self.states, default=None)
+        last = max(self.states)
         reply = self.client.services["step_simulation"].ask(steps=ticks)
         seen, quiet_since = len(self.states), time.monotonic()
         # Blocked on the reply, the states waiting in the readers (no work of ours a tick):
@@ -131,12 +149,21 @@ class WireArm:
         if answer.result.result != 1:
             raise ControllerError(f"the node refused to step: {answer.result.error_message}",
                                   self.trace())
-        end = (last if last is not None else 0) + ticks * round(1e9 / self.publish_rate)
+        end = last + ticks * round(1e9 / self.publish_rate)
         deadline = time.monotonic() + self.silence
         while max(self.states, default=-1) < end and time.monotonic() < deadline:
             self._take()                  # the last states are on their way
             time.sleep(0.0002)
         return self.trace()
+
+    def _first_state(self, deadline: float) -> bool:
+        """Until the state the node awaits an answer to at start is here (it comes once this
+        reader has matched: every trace starts at that state), or `deadline`."""
+        while not self.states and time.monotonic() < deadline:
+            self._alive()
+            time.sleep(DRAIN)
+            self._take()
+        return bool(self.states)
 
     def wait_for_writer(self, writer) -> None:
         """Until this trace's command reader has matched `writer` (a controller in this
@@ -153,8 +180,7 @@ class WireArm:
         del msg
 
     def _silent(self) -> str:
-        latest = max(self.states, default=None)
-        t = "none yet" if latest is None else f"t = {(latest - min(self.states)) / 1e9:.6f} s"
+        t = f"t = {(max(self.states) - min(self.states)) / 1e9:.6f} s"
         return (f"no command answered the state at {t} within {self.silence:g} s (wall): the "
                 f"controller went silent, or answers without the state's stamp in its "
                 f"header; domain {self.domain_id}, node log {self.log_path}")
@@ -194,26 +220,30 @@ class WireArm:
                      measured_q=pairs(readings, "position"),
                      measured_qd=pairs(readings, "velocity"), command=commands,
                      tau=pairs(truth, "effort"), books=RecordedBooks(self, t),
-                     scene=self.scene, evidence={"rrd": str(self.recording),
-                                                 "log": str(self.log_path)})
+                     scene=self.scene, evidence={"log": str(self.log_path)} | (
+                         {"rrd": str(self.recording)} if self.recording else {}))
 
     # -- starting and stopping --------------------------------------------------------------
 
     def _wait_for_node(self) -> None:
+        """Until the node's services and topics are matched and its first state is here."""
         deadline = time.monotonic() + START_TIMEOUT
         while True:
             self._alive()
             try:
                 self.client.wait_for_node()
-                return
+                break
             except TimeoutError:
                 if time.monotonic() > deadline:
-                    self.close()
-                    raise TimeoutError(f"the node did not come up on domain {self.domain_id} "
-                                       f"within {START_TIMEOUT:g} s; its log: "
-                                       f"{self.log_path}") from None
+                    break
+        if not self._first_state(deadline):
+            self.close()
+            raise TimeoutError(f"the node did not come up on domain {self.domain_id} within "
+                               f"{START_TIMEOUT:g} s; its log: {self.log_path}")
 
     def _alive(self) -> None:
+        if self.process is None:          # a launch's node: launch_testing watches it
+            return
         code = self.process.poll()
         if code is not None:
             self.log.flush()
@@ -221,15 +251,17 @@ class WireArm:
             raise RuntimeError(f"the node exited with {code}: " + " | ".join(tail))
 
     def close(self) -> None:
-        """Stop the node (SIGINT, as launch does: its recording is then whole) and leave."""
-        if self.process.poll() is None:
+        """Stop the node (SIGINT, as launch does: its recording is then whole) and leave;
+        a launch's node is the launch's to stop."""
+        if self.process is not None and self.process.poll() is None:
             self.process.send_signal(signal.SIGINT)
             try:
                 self.process.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
-        self.log.close()
+        if self.log is not None:
+            self.log.close()
         self.readers, self.client = {}, None
 
     def __enter__(self):
@@ -237,6 +269,13 @@ class WireArm:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def lockstep_parameters(scene: str = "release", parameters: dict | None = None) -> dict:
+    """The node's parameters for a controller under test: the scene, lockstep with no tick
+    of its own, started paused (the test plays or steps it once the controller is up)."""
+    return {"scene": scene, "lockstep": True, "lockstep_wait": 0.0, "paused": True} | dict(
+        parameters or {})
 
 
 def reader_hears(reader, guid) -> bool:
@@ -284,6 +323,9 @@ class RecordedBooks(dict):
 
     def __missing__(self, key):
         from ..recording.rrd.readback import read, table
+        if self.arm.recording is None:
+            raise KeyError(f"{key}: the node writes no recording (rerun_path), where the "
+                           "energy books come from")
         deadline = time.monotonic() + self.arm.silence
         while True:
             columns = _energy_columns(table(read(self.arm.recording)))

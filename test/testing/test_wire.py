@@ -55,3 +55,31 @@ def test_a_silent_controller_is_reported_naming_the_state_it_left(arm_node):
     with pytest.raises(ControllerError, match=r"no command answered the state at t = 0\.0+ s "
                                               r"within 1 s"):
         node.run(0.1)
+
+
+@pytest.mark.hunt
+@pytest.mark.parametrize("busy", [0, 2], ids=["idle", "both cores busy"])
+def test_ten_runs_over_the_wire_give_one_trace_idle_or_loaded(arm_node, busy):
+    """The same test ten times, with `busy` processes spinning beside it: one trace, bit for
+    bit (sensors on, so their draws are part of it)."""
+    import hashlib
+    import subprocess
+    import sys
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+                for _ in range(busy)]
+    digests = set()
+    try:
+        for _ in range(10):
+            node = arm_node("release", SCENE | {"sensors.seed": 9,
+                                                "sensors.position_noise": [1e-3, 1e-3],
+                                                "sensors.velocity": "differences"})
+            with Controller(pd, node):
+                trace = node.run(2.0)
+            node.close()
+            digests.add(hashlib.sha256(np.column_stack(
+                [trace.t, trace.q, trace.qd, trace.measured_q, trace.measured_qd,
+                 trace.command, trace.tau]).tobytes()).hexdigest())
+    finally:
+        for spinner in spinners:
+            spinner.kill()
+    assert len(digests) == 1, digests
