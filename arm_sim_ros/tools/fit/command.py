@@ -15,9 +15,10 @@ evaluations per start, wall time) and says why it stopped; its verdict says whet
 fitted model explains the recording (within 2 x the noise on every channel).
 
 Exit codes: 0 the fitted model explains the recording, 1 a bound was reached before the
-fit converged (one line: why, and the best point found), 2 bad input (one line), 3 the fit
-converged but the model does not explain the recording (the outputs are written, the
-verdict says by how much: the base scene lacks something the arm has).
+fit converged (one line: why, and the best point found) or the recording cannot identify a
+free key (one line: which, and why; stats.py), 2 bad input (one line), 3 the fit converged
+but the model does not explain the recording (the outputs are written, the verdict says by
+how much: the base scene lacks something the arm has).
 """
 from __future__ import annotations
 
@@ -36,7 +37,7 @@ from . import bounds as b
 from .data import FitError, read_recording
 from .keys import check_free, parse_free, with_values
 from .problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, starts
-from .stats import uncertainty, validate, warnings_for
+from .stats import Unidentified, check_motion, unidentified, uncertainty, validate, warnings_for
 
 CONNECT_SECONDS = 10.0      # a --scheduler that has not answered by then is given up
 CONNECT_GRACE = 5.0         # then Client's own timeout may still say why (refused, not Dask)
@@ -125,6 +126,11 @@ def cmd_fit(args) -> int:
     mode = "commands" if args.torque_topic else "effort"
     problem = Problem(base, free, recordings, mode, args.segment, args.validation)
     b.check_size(problem)
+    try:
+        check_motion(problem)
+    except Unidentified as nothing:
+        print(f"arm-sim: error: {nothing}", file=sys.stderr)
+        return b.UNIDENTIFIED_CODE
     points = starts(len(free), args.starts)
     # Every start on every recording alone, in parallel; several recordings are then
     # fitted together from the median of their own fits (one more start, near the optimum).
@@ -148,7 +154,11 @@ def cmd_fit(args) -> int:
               f"{b.stopped(best, args.max_evaluations, args.max_seconds)} before it converged, "
               f"from each of {len(points)} starts; best point: {point}", file=sys.stderr)
         return b.STOPPED_CODE
-    outcome = summarise(problem, results, names, deadline)
+    try:
+        outcome = summarise(problem, results, names, deadline)
+    except Unidentified as unknown:
+        print(f"arm-sim: error: {unknown}", file=sys.stderr)
+        return b.UNIDENTIFIED_CODE
     outcome["start_count"] = len(points)
     outcome["recordings"] = [{"source": r.source, "values": problem.values(best["xp"]).tolist(),
                               "converged": best["status"] > 0}
@@ -230,7 +240,8 @@ def connected(scheduler: str):
 
 
 def summarise(problem: Problem, results, names, deadline=None) -> dict:
-    """The best start, its uncertainties, warnings and validation, as plain data."""
+    """The best start, its uncertainties, warnings and validation, as plain data; or
+    Unidentified, naming the free keys the fitted simulation shows nothing of."""
     best = min(range(len(results)), key=lambda i: results[i]["cost"])
     r = results[best]
     xp, states = r["xp"], r["states"]
@@ -243,9 +254,15 @@ def summarise(problem: Problem, results, names, deadline=None) -> dict:
     values[problem.sensing] = problem.values(xp)[problem.sensing]   # delays: not rounded
     se = stats["se"] * problem.scale
     runs = problem.simulate(xp, states, problem.training)
+    unknown = unidentified(problem, stats["moved"], runs, names)
+    if unknown:
+        rest = [f"{p.key} = {v:.6g}" for i, (p, v) in enumerate(zip(problem.free, values))
+                if i not in unknown]
+        raise Unidentified("the recording cannot identify " + "; ".join(unknown.values())
+                           + (f"; fitted beside: {', '.join(rest)}" if rest else "")
+                           + "; free only keys it identifies")
     chi2 = 2 * r["cost"] / r["residuals"]
-    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], runs,
-                            names, chi2)
+    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], chi2)
     errors = np.vstack([run - problem.measured(g) for run, g in zip(runs, problem.training)])
     start = problem.values(np.ones(problem.n_parameters))
     return {
