@@ -49,6 +49,9 @@ def cmd_send_torque(args) -> int:
     if bad:              # the node would refuse it: said here, before joining the network
         raise UsageError(f"send-torque {' '.join(f'{t:g}' for t in args.torques)}: "
                          f"{', '.join(bad)} is not a torque (finite N m)")
+    from ...node.wire.one_cyclone import require_cyclonedds
+
+    require_cyclonedds("arm-sim send-torque")
     from ...node.wire.messages import check_topic_name
 
     check_topic_name(args.topic, "--topic")   # before joining the network
