@@ -55,7 +55,6 @@ class ArmSimCore(CommandInput):
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
-        # built at start: a refusal names a parameter set then (policy, the first, was blamed)
         self.sim = build_simulator(config, config.given or ("scene",)) if sim is None else sim
         self.config = config
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
