@@ -20,8 +20,8 @@ EXIT_CODES = {
            "and why: it moves nowhere beyond its noise, or the key acts nowhere in it), "
            "`arm-sim excite` faulted (no bag) or recorded a joint that never moved or whose "
            "readings show none of its motion, `arm-sim "
-           "send-torque` found no subscriber, `arm-sim record` received no message (no bag is "
-           "left)",
+           "send-torque` found no subscriber or the node refused or ignores its commands (its "
+           "/diagnostics say so), `arm-sim record` received no message (no bag is left)",
     UNEXPLAINED: "`arm-sim fit` converged, but the fitted model does not explain the "
                  "recording (its verdict: more than 2 x the noise); the outputs are written",
     REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "
