@@ -95,11 +95,15 @@ def unread(recording) -> list[int]:
     """The joints whose recorded readings (position and velocity) move nowhere beyond
     EXPLAINED x their noise, as `arm-sim fit` reads them (stats.motion): a fit learns
     nothing of them, whatever the truth did (a sensor delay longer than the run, a
-    resolution or a noise coarser than the motion)."""
+    resolution or a noise coarser than the motion). Fewer samples than a fit reads are not
+    judged: the fit refuses them itself, and their 4th differences tell no noise."""
     from .bounds import EXPLAINED
+    from .data import MIN_SAMPLES
     from .problem import noise_level
     from .stats import motion
 
+    if len(recording) < MIN_SAMPLES:
+        return []
     moves = motion(recording, noise_level(recording))
     return [j for j in (0, 1) if not max(moves[j], moves[2 + j]) > EXPLAINED]
 
