@@ -102,7 +102,7 @@ class Refusals:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        self._msg, self.first, self.latest = msg, {}, {}
+        self.first, self.latest = {}, {}
         self.reader = DataReader(participant, Topic(participant, msg.ros_topic(
             DIAGNOSTICS_TOPIC), msg.DiagnosticArray), qos=msg.default_qos(msg.DiagnosticArray))
 
