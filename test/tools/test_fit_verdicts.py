@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from arm_sim_ros.tools import cli
 from arm_sim_ros.tools.fit.data import checked
@@ -69,6 +70,27 @@ def test_white_noise_identifies_no_key(capsys, tmp_path, sigma, seed, mean, free
     line = refused(capsys, path, free)
     assert f"noise.csv cannot identify {keys}: nothing in it moves beyond its noise" in line
     assert "white noise or a still arm" in line
+
+
+@settings(max_examples=30, deadline=None, derandomize=True, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(sigma=st.floats(1e-6, 1e3), n=st.integers(50, 3000), rate=st.sampled_from([100.0, 500.0,
+                                                                                   1000.0]),
+       pose=st.tuples(st.floats(-10, 10), st.floats(-10, 10)), seed=st.integers(0, 2 ** 32 - 1))
+def test_any_white_noise_is_refused_never_explained(sigma, n, rate, pose, seed):
+    """The class: any spread, length, rate and pose of white noise (the velocities about 0,
+    as a still arm's are) identifies no key."""
+    from arm_sim_ros.tools.fit.data import checked
+    from arm_sim_ros.tools.fit.problem import Problem
+    from arm_sim_ros.tools.fit.keys import parse_free
+    from arm_sim_ros.tools.fit.stats import Unidentified, check_motion
+    from arm_sim_ros.physics.scene import load_scene
+
+    q, qd, tau = white(n, sigma, seed, (*pose, 0.0, 0.0, 0.0, 0.0))
+    rec = checked("noise", np.arange(n) / rate, q, qd, tau)
+    scene = load_scene("downward_equilibrium").replace(step_size=1.0 / rate)
+    with pytest.raises(Unidentified, match="nothing in it moves beyond its noise"):
+        check_motion(Problem(scene, parse_free("damping", scene), [rec]))
 
 
 @pytest.mark.parametrize("pose, noise", [((-math.pi / 2, 0.0), 0.0), ((-math.pi / 2, 0.0), 1e-4),

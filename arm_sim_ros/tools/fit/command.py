@@ -40,6 +40,8 @@ from .problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, st
 from .stats import Unidentified, check_motion, unidentified, uncertainty, validate, warnings_for
 
 CONNECT_SECONDS = 10.0      # a --scheduler that has not answered by then is given up
+# setup.py's extra `fit` (a test checks that they agree): what --scheduler needs
+FIT_EXTRA = ("dask==2026.8.0", "distributed==2026.8.0")
 CONNECT_GRACE = 5.0         # then Client's own timeout may still say why (refused, not Dask)
 
 
@@ -105,6 +107,8 @@ def checked_args(args) -> tuple:
     for k, path in enumerate(paths):
         if path in paths[:k]:
             raise FitError(f"{args.bags[k]} is given twice: a recording counts once")
+    if args.scheduler:
+        dask_client()                      # before anything is read or fitted
     cpus = os.cpu_count() or 1
     if args.workers > cpus and not args.scheduler:
         print(f"arm-sim: --workers {args.workers}: {cpus} processes, one per CPU",
@@ -188,8 +192,8 @@ def run_tasks(function, tasks, workers: int, scheduler: str | None, deadline: fl
     same wherever they run; each stops at `deadline` (time.time()) by itself, and a cluster
     that has returned nothing by then is given up (Stopped)."""
     if scheduler:
-        from distributed import wait
         with connected(scheduler) as client:
+            from distributed import wait
             futures = [client.submit(function, *task, pure=False) for task in tasks]
             try:
                 wait(futures, timeout=max(1.0, deadline - time.time() + CONNECT_SECONDS))
@@ -206,14 +210,22 @@ def run_tasks(function, tasks, workers: int, scheduler: str | None, deadline: fl
         return list(pool.map(function, *zip(*tasks)))
 
 
+def dask_client():
+    """distributed.Client, or FitError naming the extra that installs it."""
+    try:
+        from distributed import Client
+    except ImportError as error:
+        raise FitError(f"--scheduler needs dask.distributed, which does not import here "
+                       f"({error}): pip install 'arm_sim_ros[fit]' (the extra fit: "
+                       f"{' '.join(FIT_EXTRA)})") from None
+    return Client
+
+
 def connected(scheduler: str):
     """A Dask client of `scheduler`, or FitError in one line: no Dask, nobody there, not a
     Dask scheduler (an HTTP port answers nonsense), or silent past CONNECT_SECONDS (Client's
     own timeout does not cover a server that accepts and says nothing)."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise FitError("--scheduler needs Dask: pip install 'arm_sim_ros[fit]'") from None
+    Client = dask_client()
     import threading
 
     made = []

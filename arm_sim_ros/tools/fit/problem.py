@@ -61,8 +61,9 @@ def noise_level(recording) -> np.ndarray:
     replay's error, which 4th differences cannot see)."""
     x = np.hstack([recording.q, recording.qd])
     fourth = np.diff(x, n=4, axis=0)
-    mad = np.median(np.abs(fourth - np.median(fourth, axis=0)), axis=0)
-    change = np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0))
+    mad = np.median(np.abs(fourth - np.median(fourth, axis=0)), axis=0) if len(fourth) \
+        else np.zeros(4)                   # too short for it: excite at a low --rate
+    change = np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0)) if len(x) > 1 else np.zeros(4)
     return np.maximum.reduce([1.4826 * mad / np.sqrt(70.0), REPLAY_RESOLUTION * change,
                               np.full(4, NOISE_FLOOR)])
 
