@@ -21,7 +21,7 @@ ORDER = {
              "stop", "recorder_link", "core", "transports", "main", "entry"],
     "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
               "inspect", "batch", "urdf", "cli", "reference"],
-    "testing": ["trace", "loop", "wire", "controller", "evidence", "plugin", "launch"],
+    "testing": ["trace", "loop", "heard", "wire", "controller", "evidence", "plugin", "launch"],
 }
 LAYERS = list(ORDER)
 # Third-party modules a layer or group must never import (its promise, in DESIGN.md).
