@@ -24,7 +24,7 @@ from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_va
 from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
-from .status import Interval, health, status_line
+from .status import Interval, health, status_line, stopped_line, what_is_on
 
 
 class ArmSimCore(CommandInput):
@@ -44,7 +44,8 @@ class ArmSimCore(CommandInput):
         self.recorder = RecorderLink(log, recorder if recorder is not None
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
-        self._event(started(config))
+        self.began = None                 # (wall, stamp) when the first tick was done
+        self._event(started(config, recording=self.recorder.recorder is not None))
         if warning := angle_warning(config.scene.initial_positions, node=True):
             log.warning(warning)
 
@@ -151,7 +152,14 @@ class ArmSimCore(CommandInput):
                 servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
+        if self.interval.waiting:         # the status's pace counts from the first tick done
+            self._first_tick_done()
         return self.joint_state()
+
+    def _first_tick_done(self) -> None:
+        now = self.wall_clock()
+        self.interval.begin(now, self.sim.time)
+        self.began = self.began or (now, self.stamp_ns())
 
     def _note_lateness(self, wall_now: float) -> None:
         period = self.config.wall_period
@@ -206,7 +214,13 @@ class ArmSimCore(CommandInput):
         self._event(why)
 
     def finish(self) -> None:
-        self.recorder.finish()
+        """The recording closed, then the stop line: where, at what pace, what was written."""
+        target = self.config.values["rerun_path"]
+        written = self.recorder.finish() and target and f"wrote {target}"
+        elapsed = None if self.began is None else (
+            (self.stamp_ns() - self.began[1]) / 1e9, self.wall_clock() - self.began[0])
+        self.log.info(stopped_line(self.sim.time, elapsed, written, self.refused_commands,
+                                   self.late_ticks))
 
     def real_time_factor(self, wall_now: float) -> float:
         return self.interval.real_time_factor(wall_now, self.sim.time)
@@ -225,18 +239,20 @@ class ArmSimCore(CommandInput):
                               NODE_NAME, values)
 
     def status_line(self, rtf: float) -> str:
-        """The one-line status the node prints each second."""
-        return status_line(self.sim, self.held, rtf, self.refused_commands)
+        """The one-line status the node prints each second (no pace before the first tick)."""
+        return status_line(self.sim, self.held, None if self.interval.waiting else rtf,
+                           self.refused_commands)
 
 
-def started(config: NodeConfig) -> str:
-    """The start line: the recording's file, if any (scripts/run names a new one each run);
-    with a robot_description, every scene value the URDF replaced."""
+def started(config: NodeConfig, recording: bool = True) -> str:
+    """The start line: the scene, its step and method, and what is on (status.what_is_on:
+    the estimate, sensors and where the truth goes, command latency, lockstep, the recording,
+    named only where `recording` is under way; scripts/run names a new file each run); with a
+    robot_description, every scene value the URDF replaced."""
     scene, values = config.scene, config.values
     text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
-            f"{config.steps_per_tick} steps per tick")
-    if values["rerun_path"]:
-        text += f"; recording {values['rerun_path']}"
+            f"{scene.method}, {config.steps_per_tick} steps per tick; "
+            + "; ".join(what_is_on(scene, values, recording)))
     if values["robot_description"]:
         base = load_scene(values["scene"])
         changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))

@@ -135,6 +135,10 @@ class RecorderLink:
         if ticks and states:
             self.call("node_ticks", self.sim, ticks)
 
-    def finish(self) -> None:
+    def finish(self) -> bool:
+        """The recording finished; True when it was written whole (a recorder that failed
+        on the way, or none, is not)."""
+        alive = self.recorder is not None
         self.call("finish", self.sim)
-        self.recorder = None
+        written, self.recorder = alive and self.recorder is not None, None
+        return written
