@@ -23,15 +23,19 @@ from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
-# Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
-ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
-              "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 # Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
 # a validated mapping is built for its cross-checks.
 MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
 BUILT = BUILDERS | {"sensors": sensing.Sensors}
+# The one rule for degrees: every key whose unit is an angle (rad, or rad per count) takes a
+# number of degrees written `90deg`, wherever a value is given: --set, a scene file, a node
+# parameter (`-p "initial_positions:=[90deg, 0deg]"`). Every other key refuses `deg`.
+ANGLE_UNITS = ("rad", "rad per count")
+ANGLE_KEYS = ("initial_positions",) + tuple(
+    f"{effect}.{parameter.name}" for effect in sorted(MAPPINGS)
+    for parameter in MAPPINGS[effect].parameters if parameter.unit in ANGLE_UNITS)
 
 
 class SceneError(ValueError):
@@ -240,6 +244,7 @@ def coerce_value(name: str, kind: str, value):
     """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
     "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
     its own numbers, text and pairs."""
+    value = in_radians(name, value)
     if kind == "float_or_pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
             return coerce_value(name, "float", value)
@@ -250,6 +255,8 @@ def coerce_value(name: str, kind: str, value):
     if kind == "effect":
         if value is None:
             return None
+        if isinstance(value, dict):
+            value = {k: in_radians(f"{name}.{k}", v) for k, v in value.items()}
         try:
             values = validate(name, MAPPINGS[name].parameters, value)
             if name in BUILT:
@@ -329,10 +336,32 @@ def _number(key: str, text: str) -> float:
     """A number; an angle may be given in degrees as `90deg`."""
     text = text.strip()
     if text.endswith("deg"):
-        if key not in ANGLE_KEYS:
-            raise SceneError(f"{key}={text!r}: only angles take deg ({', '.join(ANGLE_KEYS)})")
+        if key.partition("[")[0] not in ANGLE_KEYS:
+            raise SceneError(f"{key}={text!r}: only angles take deg, the keys in rad: "
+                             f"{', '.join(ANGLE_KEYS)}")
         return radians(float(text[:-3]))
     return float(text)
+
+
+def in_radians(key: str, value):
+    """`value` of `key` with every number written in degrees (`90deg`, as text: from YAML or
+    ROS 2 parameters) in radians; a value with no `deg` in it comes back as it was. A `deg`
+    on a key that is no angle is refused, saying which keys are."""
+    def number(v, where):
+        if isinstance(v, str) and v.strip().endswith("deg"):
+            try:
+                return _number(where, v)
+            except ValueError as error:       # `90.5.1deg`: one line, the key named
+                if isinstance(error, SceneError):
+                    raise
+                raise SceneError(f"{where}={v!r} is malformed: expected a number of degrees "
+                                 "like 90deg") from None
+        return v
+    if isinstance(value, str):
+        return parse_value(key, value) if "deg" in value and key in ANGLE_KEYS else number(value, key)
+    if isinstance(value, (list, tuple)):
+        return type(value)(number(v, f"{key}[{i}]") for i, v in enumerate(value))
+    return value
 
 
 def scene_dirs() -> list[Path]:
