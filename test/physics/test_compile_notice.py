@@ -170,3 +170,15 @@ def test_the_node_hears_a_long_compile_on_its_log(monkeypatch):
     assert pulse.tick() is None
     clock.now = 29.0
     assert len(logged) == 1 and pulse.tick() and len(logged) == 2
+
+
+def test_still_compiling_counts_the_whole_run_s_compiles(monkeypatch):
+    """stick_slip compiles its modes one after another: the pulse read "9 s so far", then
+    "1 s so far" at the next mode's start."""
+    clock = iter([10.0, 14.0, 20.0, 23.0])
+    monkeypatch.setattr(cache.time, "perf_counter", lambda: next(clock))
+    compiles = cache.Compiles()
+    compiles.on_start(KERNEL)          # 10.0
+    compiles.on_end()                  # 14.0: the first mode, 4 s
+    compiles.on_start(KERNEL)          # 20.0: the next mode
+    assert compiles.under_way() == 7.0   # at 23.0: 4 + 3, not 3

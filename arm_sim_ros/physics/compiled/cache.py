@@ -67,9 +67,10 @@ class Compiles:
             return self.seconds + ongoing
 
     def under_way(self) -> float | None:
-        """Seconds the compile under way has taken so far; None when none is."""
+        """While a compile is under way, the seconds this process has spent compiling (a
+        scene's modes compile one after another: the sum, never back to 0); else None."""
         with self.lock:
-            return time.perf_counter() - self.started if self.depth else None
+            return self.seconds + time.perf_counter() - self.started if self.depth else None
 
 
 COMPILES = Compiles()
@@ -81,7 +82,7 @@ def compile_seconds() -> float:
 
 
 def compiling() -> float | None:
-    """Seconds the compile under way has taken so far; None when no compile is under way."""
+    """Seconds spent compiling so far while a compile is under way; None when none is."""
     return COMPILES.under_way()
 
 
