@@ -6,6 +6,7 @@ steps too coarse for it."""
 import pytest
 
 from tools.test_no_surprises import ListLog
+from tools.test_run_endings import Clock
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import resolve_parameters
 from arm_sim_ros.physics.scene import load_scene
@@ -112,21 +113,12 @@ def test_a_recording_that_could_not_start_is_not_named_as_one(tmp_path, monkeypa
     assert said(log, "info")[-1].endswith("; no recording; 0 commands refused, 0 late ticks")
 
 
-class Wall:
-    """A wall clock that a tick moves on by `per_tick` seconds."""
-
-    def __init__(self):
-        self.now = 100.0
-
-    def __call__(self):
-        return self.now
-
-
 def test_the_status_pace_starts_at_the_first_tick_and_the_stop_line_sums_the_run(tmp_path):
     """A first tick that took 3 s (a compile) read "real-time factor 0.00" in the first status
     line; then a duplicate last status line read 0.00 or 1.42. Now the pace counts from the
     first tick done, and the run ends with one line: where, at what pace, what was written."""
-    wall, log = Wall(), ListLog()
+    wall, log = Clock(), ListLog()
+    wall.now = 100.0
     recording = tmp_path / "arm.rrd"
     core = ArmSimCore(resolve_parameters({"rerun_path": str(recording)}), log, wall_clock=wall)
     assert "real-time factor      -   energy" in core.status_line(0.0)   # no tick yet

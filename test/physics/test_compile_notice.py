@@ -8,6 +8,7 @@ import pytest
 from arm_sim_ros.physics.compiled import cache
 from arm_sim_ros.tools import progress as progress_module
 from arm_sim_ros.tools.progress import Progress
+from tools.test_run_endings import Clock
 
 KERNEL = "arm_sim_kernel_0123456789abcdef0123"
 
@@ -72,14 +73,6 @@ def test_a_kernel_compiled_for_the_first_time_is_heard_and_timed(heard, tmp_path
     assert len(heard) == 1 and cache.compile_seconds() > 0.0
     assert list((tmp_path / "__pycache__").glob(f"{module.__name__}.*.nbi"))
     assert numba.__version__
-
-
-class Clock:
-    def __init__(self):
-        self.now = 0.0
-
-    def __call__(self):
-        return self.now
 
 
 def test_the_time_left_leaves_the_compile_out(monkeypatch):
