@@ -15,8 +15,8 @@ from ..physics.compiled import cache
 from ..physics.compiled.cache import compile_seconds
 
 QUIET_FOR = 2.0        # wall seconds of work before any progress is shown
-PLAIN_PERIOD = 9.0     # wall seconds between plain lines: with a check every few 0.01 s,
-                       # a line at least every 10 s when stderr is not a terminal
+PLAIN_PERIOD = 7.5     # wall seconds between plain lines: with a check every few 0.01 s
+                       # (and a loaded machine's delays), a line at least every 10 s off a terminal
 PACE_AFTER = 1.0       # wall seconds of work (no compile) before a time left is given
 
 

@@ -29,8 +29,9 @@ KERNEL_MODULES = "arm_sim_kernel_"   # build.load's module names
 # and geared_arm 36 s, each switching mode the run meets a module of its own): the wall
 # time it takes is this times how crowded the cores are.
 FIRST_COMPILE_CPU = {"smooth": 10.0, "switching": 30.0}
-PULSE_PERIOD = 9.0                   # s without a line before a Pulse speaks: its ticks
-PULSE_TICK = 0.5                     # (every PULSE_TICK s) keep every gap under 10 s
+PULSE_PERIOD = 7.5                   # s without a line before a Pulse speaks; it looks every
+PULSE_TICK = 0.5                     # PULSE_TICK s, and llvmlite may hold the GIL a second or
+                                     # two on a loaded machine: every gap stays under 10 s
 listeners: list = []                 # callables(line): who hears the notice
 _log = logging.getLogger("arm_sim_ros.compile")
 
