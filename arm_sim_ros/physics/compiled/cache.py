@@ -24,10 +24,11 @@ import threading
 import time
 
 KERNEL_MODULES = "arm_sim_kernel_"   # build.load's module names
-# CPU seconds of a scene's first compile, measured with an empty cache on a 2-core machine
-# (release and damped_release 10 s: their step, residual and run kernel; stick_slip 30 s
-# and geared_arm 36 s, each switching mode the run meets a module of its own): the wall
-# time it takes is this times how crowded the cores are.
+# CPU seconds of a scene's first compile with an empty cache (release: its step, residual and
+# run kernel; stick_slip: each switching mode the run meets a module of its own); the wall
+# time it takes is this times how crowded the cores are. Measured: bench_speed.py's
+# first_compile table, benchmarks/results/speed_first_compile.txt (test_figures holds these
+# within 2x of it; a loaded machine's CPU seconds run up to twice an idle one's).
 FIRST_COMPILE_CPU = {"smooth": 10.0, "switching": 30.0}
 PULSE_PERIOD = 7.5                   # s without a line before a Pulse speaks; it looks every
 PULSE_TICK = 0.5                     # PULSE_TICK s, and llvmlite may hold the GIL a second or
