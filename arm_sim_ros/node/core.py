@@ -24,10 +24,11 @@ from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_va
 from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
-from .status import Interval, health, status_line, stopped_line, what_is_on
+from .schedule import Lockstep
+from .status import Console, Interval, health, what_is_on
 
 
-class ArmSimCore(CommandInput):
+class ArmSimCore(CommandInput, Console):
     """Simulator + command handling + message assembly; transports call in, never the reverse."""
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
@@ -37,14 +38,13 @@ class ArmSimCore(CommandInput):
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
-        self.lockstep_states = []         # JointStates of lockstep ticks not yet published
+        self.lockstep = Lockstep()        # which command answers which state
         self.paused = False               # no physics; the held state is published (simulation.py)
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
-        self.began = None                 # (wall, stamp) when the first tick was done
         self._event(started(config, recording=self.recorder.recorder is not None))
         if warning := angle_warning(config.scene.initial_positions, node=True):
             log.warning(warning)
@@ -53,6 +53,7 @@ class ArmSimCore(CommandInput):
     refused_commands = property(lambda self: self.commands.refused)
     command_timeouts = property(lambda self: self.commands.timeouts)
     command = property(lambda self: self.commands.value)
+    stale_commands = property(lambda self: self.lockstep.stale)
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
@@ -67,6 +68,8 @@ class ArmSimCore(CommandInput):
         self._last_tick_wall = None
         self.interval = Interval(self.wall_clock(), self.sim.time, self.refused_commands,
                                  self.late_ticks)
+        if config.values["lockstep"]:     # the state the first command answers
+            self.lockstep.queue(self.joint_state())
 
     def _on_sim_event(self, event) -> None:
         """Said at the event's level as it happens (a fault: _advance), warnings rate-limited."""
@@ -94,6 +97,8 @@ class ArmSimCore(CommandInput):
             self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder = self.recorder.reopen(config)
+        if "lockstep" in changed and config.values["lockstep"] and not restart:
+            self.lockstep.queue(self.joint_state())      # switched on: answer this state
         return changed
 
     def _event(self, text: str) -> None:
@@ -121,28 +126,23 @@ class ArmSimCore(CommandInput):
     def tick(self, wall_now: float | None = None,
              clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
-        lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless a node listens on /clock
+        lockstep the answers tick (callbacks.py): None, unless a node listens on /clock
         (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
-        it commands) and no tick came for lockstep_wait. Paused: the held state, time
-        standing still."""
-        if self.paused:
-            return self.joint_state()
-        if not self.config.values["lockstep"]:
-            return self._tick(wall_now)
+        it commands) and no tick came for lockstep_wait. Paused: the held state."""
+        if self.paused or not self.config.values["lockstep"]:   # lockstep: each state once
+            return (None if self.config.values["lockstep"] else self.joint_state()) \
+                if self.paused else self._tick(wall_now)
         wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
-        return self._tick(now) if wait and (last is None or now - last >= wait) else None
+        return self.lockstep.latest(self._tick(now)) if wait and (
+            last is None or now - last >= wait) else None
 
     def step_tick(self) -> JointStateData:
-        """A tick now, whatever the schedule (StepSimulation); its JointState."""
+        """A tick now (StepSimulation; in lockstep once answered: SimulationControl.ready)."""
         self._last_tick_wall = None       # asked for: not late
-        return self._tick()
-
-    def take_lockstep_states(self) -> list:
-        states, self.lockstep_states = self.lockstep_states, []
-        return states
+        data = self._tick()
+        return self.lockstep.latest(data) if self.config.values["lockstep"] else data
 
     def _tick(self, wall_now: float | None = None) -> JointStateData:
         self._note_lateness(self.wall_clock() if wall_now is None else wall_now)
@@ -153,13 +153,8 @@ class ArmSimCore(CommandInput):
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
         if self.interval.waiting:         # the status's pace counts from the first tick done
-            self._first_tick_done()
+            self.first_tick_done()
         return self.joint_state()
-
-    def _first_tick_done(self) -> None:
-        now = self.wall_clock()
-        self.interval.begin(now, self.sim.time)
-        self.began = self.began or (now, self.stamp_ns())
 
     def _note_lateness(self, wall_now: float) -> None:
         period = self.config.wall_period
@@ -214,13 +209,7 @@ class ArmSimCore(CommandInput):
         self._event(why)
 
     def finish(self) -> None:
-        """The recording closed, then the stop line: where, at what pace, what was written."""
-        target = self.config.values["rerun_path"]
-        written = self.recorder.finish() and target and f"wrote {target}"
-        elapsed = None if self.began is None else (
-            (self.stamp_ns() - self.began[1]) / 1e9, self.wall_clock() - self.began[0])
-        self.log.info(stopped_line(self.sim.time, elapsed, written, self.refused_commands,
-                                   self.late_ticks))
+        self.log.info(self.stop_line(self.recorder.finish()))    # the recording closed first
 
     def real_time_factor(self, wall_now: float) -> float:
         return self.interval.real_time_factor(wall_now, self.sim.time)
@@ -237,11 +226,6 @@ class ArmSimCore(CommandInput):
                                    {name: getattr(self, name) for name in COUNTERS})
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
-
-    def status_line(self, rtf: float) -> str:
-        """The one-line status the node prints each second (no pace before the first tick)."""
-        return status_line(self.sim, self.held, None if self.interval.waiting else rtf,
-                           self.refused_commands)
 
 
 def started(config: NodeConfig, recording: bool = True) -> str:

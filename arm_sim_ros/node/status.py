@@ -5,6 +5,32 @@ from __future__ import annotations
 from ..interface import ERROR, OK, WARN
 
 
+class Console:
+    """What the node core prints (a part of ArmSimCore): the pace counted from the first tick
+    done, the status line each second and the stop line at the end."""
+
+    began = None                    # (wall, stamp) when the run's first tick was done
+
+    def first_tick_done(self) -> None:
+        now = self.wall_clock()
+        self.interval.begin(now, self.sim.time)
+        self.began = self.began or (now, self.stamp_ns())
+
+    def status_line(self, rtf: float) -> str:
+        """The one-line status the node prints each second (no pace before the first tick)."""
+        return status_line(self.sim, self.held, None if self.interval.waiting else rtf,
+                           self.refused_commands)
+
+    def stop_line(self, recorded: bool) -> str:
+        """Where it stopped, at what pace since the first tick, what it wrote (`recorded`:
+        the recording was finished whole), what it refused."""
+        target = self.config.values["rerun_path"]
+        elapsed = None if self.began is None else (
+            (self.stamp_ns() - self.began[1]) / 1e9, self.wall_clock() - self.began[0])
+        return stopped_line(self.sim.time, elapsed, recorded and target and f"wrote {target}",
+                            self.refused_commands, self.late_ticks)
+
+
 class Interval:
     """What changed since the previous 1 Hz status: simulated and wall time, refused commands,
     late ticks. A new simulator's first interval starts when its first tick is done

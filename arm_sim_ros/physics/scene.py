@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from math import inf, isfinite, radians
+from math import inf, isfinite
 from pathlib import Path
 
 from .. import yaml_files
@@ -17,7 +17,7 @@ from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEP
 from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
-from . import sensing
+from . import angles, sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
@@ -29,13 +29,6 @@ MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 # a validated mapping is built for its cross-checks.
 MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
 BUILT = BUILDERS | {"sensors": sensing.Sensors}
-# The one rule for degrees: every key whose unit is an angle (rad, or rad per count) takes a
-# number of degrees written `90deg`, wherever a value is given: --set, a scene file, a node
-# parameter (`-p "initial_positions:=[90deg, 0deg]"`). Every other key refuses `deg`.
-ANGLE_UNITS = ("rad", "rad per count")
-ANGLE_KEYS = ("initial_positions",) + tuple(
-    f"{effect}.{parameter.name}" for effect in sorted(MAPPINGS)
-    for parameter in MAPPINGS[effect].parameters if parameter.unit in ANGLE_UNITS)
 
 
 class SceneError(ValueError):
@@ -333,35 +326,14 @@ def parse_value(key: str, text: str):
 
 
 def _number(key: str, text: str) -> float:
-    """A number; an angle may be given in degrees as `90deg`."""
+    """A number; an angle may be given in degrees as `90deg` (angles.py)."""
     text = text.strip()
-    if text.endswith("deg"):
-        if key.partition("[")[0] not in ANGLE_KEYS:
-            raise SceneError(f"{key}={text!r}: only angles take deg, the keys in rad: "
-                             f"{', '.join(ANGLE_KEYS)}")
-        return radians(float(text[:-3]))
-    return float(text)
+    return angles.degrees(key, text, SceneError) if text.endswith("deg") else float(text)
 
 
 def in_radians(key: str, value):
-    """`value` of `key` with every number written in degrees (`90deg`, as text: from YAML or
-    ROS 2 parameters) in radians; a value with no `deg` in it comes back as it was. A `deg`
-    on a key that is no angle is refused, saying which keys are."""
-    def number(v, where):
-        if isinstance(v, str) and v.strip().endswith("deg"):
-            try:
-                return _number(where, v)
-            except ValueError as error:       # `90.5.1deg`: one line, the key named
-                if isinstance(error, SceneError):
-                    raise
-                raise SceneError(f"{where}={v!r} is malformed: expected a number of degrees "
-                                 "like 90deg") from None
-        return v
-    if isinstance(value, str):
-        return parse_value(key, value) if "deg" in value and key in ANGLE_KEYS else number(value, key)
-    if isinstance(value, (list, tuple)):
-        return type(value)(number(v, f"{key}[{i}]") for i, v in enumerate(value))
-    return value
+    """`value` with its numbers in degrees in radians (angles.py's rule), or SceneError."""
+    return angles.in_radians(key, value, parse_value, SceneError)
 
 
 def scene_dirs() -> list[Path]:

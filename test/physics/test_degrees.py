@@ -6,7 +6,8 @@ from math import radians
 
 import pytest
 
-from arm_sim_ros.physics.scene import ANGLE_KEYS, MAPPINGS, SceneError, load_scene, scene_from_file
+from arm_sim_ros.physics.angles import ANGLE_KEYS
+from arm_sim_ros.physics.scene import MAPPINGS, SceneError, load_scene, scene_from_file
 
 
 def test_the_angle_keys_are_every_key_in_rad_and_only_those():
