@@ -57,7 +57,7 @@ class ArmSimCore(CommandInput, Console):
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
-        self.sim = build_simulator(config, SPECS) if sim is None else sim
+        self.sim = build_simulator(config, config.given or ("scene",)) if sim is None else sim
         self.config = config
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
@@ -215,15 +215,15 @@ class ArmSimCore(CommandInput, Console):
         return self.interval.real_time_factor(wall_now, self.sim.time)
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
-        """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
-        sub-steps and refused steps. Rates are over the interval since the previous call."""
+        """The 1 Hz status (diagnostics.py); rates over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
                                                          self.refused_commands, self.late_ticks)
         level, message = health(self.held, new_refused, new_late, self.sim.books_fault)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
-                                   {name: getattr(self, name) for name in COUNTERS})
+                                   {name: getattr(self, name) for name in COUNTERS},
+                                   self.commands.last_refusal)
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
 

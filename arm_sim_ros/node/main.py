@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import time
 
@@ -22,6 +21,7 @@ from ..interface import NODE_NAME
 from ..physics.compiled.cache import log_pulse
 from ..physics.scene import MAX_DURATION
 from ..usage import DONE, REFUSED, ArgumentParser, UsageError, exit_as_main, one_line
+from .stop import Stop, stopped_while_starting
 from .params.parameters import PARAMETERS, when_changed
 from .params.values import ParameterRefused
 from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
@@ -53,19 +53,6 @@ class _RosFormatter(logging.Formatter):
         return f"[{level}] [{record.created:.9f}] [{record.name}]: {record.getMessage()}"
 
 
-class Stop:
-    """SIGINT and SIGTERM: KeyboardInterrupt where Python is, and remembered, because one
-    raised inside a C library's callback into Python is printed and dropped there (llvmlite's,
-    while numba compiles a scene's code at the first tick: the node ran on). The dds loop
-    reads `requested` every pass."""
-
-    requested = False
-
-    def __call__(self, number, frame):
-        self.requested = True
-        raise KeyboardInterrupt
-
-
 def run_dds(ros_argv: list, duration: float | None, status, stop=None, quiet=False) -> int:
     from .wire.messages import close_domains
     from .transports.dds import DdsArmSimNode
@@ -75,11 +62,18 @@ def run_dds(ros_argv: list, duration: float | None, status, stop=None, quiet=Fal
     name, namespace, rules = node_identity(ros["remap"], NODE_NAME)
     node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name, namespace=namespace,
                          remap=rules)   # a DiscoveryError is a UsageError: one line, exit 2
+    early = stop is not None and stop.requested     # a stop while it started: now, whole
+    if stop is not None:
+        stop.starting = False
     try:
         node.spin(duration, status, stopped=stop and (lambda: stop.requested))
     finally:
+        path = node.core.config.values["rerun_path"]
         node.close()
         close_domains()      # Cyclone torn down now, in order, not by interpreter teardown
+        if early:
+            print(stopped_while_starting(stop, f"its recording {path} holds its start" if path
+                                         else "no recording was asked for"), file=sys.stderr)
     return 0
 
 
@@ -124,15 +118,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv=None, stop: Stop | None = None) -> int:
+    """The node; `stop`: the signals' handler, installed already by the console script
+    (entry.py) before the node's modules were imported."""
     argv = sys.argv[1:] if argv is None else list(argv)
     ours, ros_argv = split_ros_args(argv)
-    # launch stops nodes with SIGINT, then SIGTERM: both end the loop the same clean way.
-    # SIGINT too, explicitly: Python leaves it ignored when the parent started us with it
-    # ignored (`nohup`, `cmd &` in a script), and then Ctrl-C could never stop the node.
-    stop = Stop()
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, stop)
+    if stop is None:
+        stop = Stop()
+        stop.starting = True
+        stop.install()
     try:
         args = parse_ours(ours)
         if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:
@@ -142,6 +136,9 @@ def main(argv=None) -> int:
         status = None if args.quiet else _print_status
         log_pulse()          # a first compile at the first tick: "still compiling" each 10 s
         if transport == "rclpy":
+            if stop.requested:            # rclpy.init takes the signals over: said now
+                print(stopped_while_starting(stop, "no recording was written"), file=sys.stderr)
+                return DONE
             from .transports.rclpy_transport import run
             quiet = ["--log-level", "warn"] if args.quiet else []     # a later one wins
             return run(["arm_sim_node", "--ros-args", *quiet, *ros_argv], args.duration, status)
@@ -150,6 +147,8 @@ def main(argv=None) -> int:
         print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
         return REFUSED
     except KeyboardInterrupt:
+        if stop.starting:                 # a second signal while it started: it did not wait
+            print(stopped_while_starting(stop, "no recording was finished"), file=sys.stderr)
         return DONE
     except Exception:
         # A signal met inside numba's first compile is dropped in llvmlite's callback and

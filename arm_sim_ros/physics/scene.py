@@ -359,7 +359,7 @@ def load_scene(name: str = "release") -> Scene:
     directory in it); the preset directories are searched in scene_dirs() order."""
     if name.endswith((".yaml", ".yml")) or os.sep in name:
         path = Path(name)
-        if not _is_file(path):
+        if not _is_file(path, Path.exists):     # a directory: yaml_files says so
             raise SceneError(f"scene file {name} does not exist")
         return scene_from_file(path, path.stem)
     for directory in scene_dirs():
@@ -371,9 +371,9 @@ def load_scene(name: str = "release") -> Scene:
                      f"{', '.join(names) or 'none found'} (or give a path to a .yaml file)")
 
 
-def _is_file(path: Path) -> bool:
+def _is_file(path: Path, test=Path.is_file) -> bool:
     try:
-        return path.is_file()
+        return test(path)
     except (OSError, ValueError):          # a name too long, a NUL byte in it
         return False
 
@@ -385,6 +385,9 @@ def scene_from_file(path: Path, name: str) -> Scene:
         raise SceneError(str(error)) from None
     if not isinstance(data := {} if data is None else data, dict):
         raise SceneError(f"scene file {path} must hold a mapping of keys to values")
+    if data and not set(data) & set(FIELD_KINDS):     # /etc/shadow: its lines never echoed
+        raise SceneError(f"{path} is not a scene file: not one of its keys is a scene key "
+                         "(`arm-sim scenes` lists the presets)")
     try:
         return Scene(name=name).replace(**data)
     except SceneError as error:

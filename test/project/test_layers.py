@@ -18,7 +18,7 @@ ORDER = {
                 "angles", "scene", "urdf", "compiled", "simulator", "batch", "metrics"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
-             "recorder_link", "core", "transports", "main"],
+             "stop", "recorder_link", "core", "transports", "main", "entry"],
     "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
               "inspect", "batch", "urdf", "cli", "reference"],
     "testing": ["trace", "loop", "wire", "controller", "evidence", "plugin", "launch"],

@@ -56,3 +56,28 @@ def test_inspect_wants_a_recording_or_a_scene_and_says_so(capsys, tmp_path):
             (tmp_path / "adaptive.yaml").write_text("integrator: dopri5\n", encoding="utf-8")
         assert cli.main(["inspect", *argv]) == 2
         assert said in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["inspect", "--source"], ["run", "--duration", "0.1",
+                                                                  "--scene"]])
+def test_a_scene_path_that_is_no_scene_file_says_what_it_is(capsys, tmp_path, command):
+    """Issue 47: a directory "does not exist"; a file that is no scene (an unreadable one for
+    anyone but root, /etc/shadow) had its first line echoed as an "unknown scene key"."""
+    (tmp_path / "folder.yaml").mkdir()
+    os.mkfifo(tmp_path / "pipe.yaml")
+    (tmp_path / "shadow").write_text("root:$y$j9T$secret:20228:0:99999:7:::\n"
+                                     "daemon:*:20228:0:99999:7:::\n", encoding="utf-8")
+    (tmp_path / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 9\n",
+                                            encoding="utf-8")
+    cases = {"folder.yaml": "scene file {} is a directory, not a YAML file",
+             "pipe.yaml": "scene file {} is not a regular file (a device or a pipe), not a YAML "
+                          "file",
+             "shadow": "{} is not a scene file: not one of its keys is a scene key",
+             "metadata.yaml": "{} is not a scene file: not one of its keys is a scene key",
+             "absent.yaml": "scene file {} does not exist"}
+    for name, said in cases.items():
+        path = str(tmp_path / name)
+        assert cli.main([*command, path]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err.startswith("arm-sim: error: " + said.format(path)), err
+        assert err.count("\n") == 1 and "secret" not in err and "daemon" not in err
