@@ -83,7 +83,7 @@ class Progress:
                     self.lines.bar = self.bar
                 self.bar.n = done
                 self.bar.set_postfix_str(self.left(now), refresh=True)
-        elif now - self.lines.last >= PLAIN_PERIOD:
+        elif now - max(self.lines.last, self.started) >= PLAIN_PERIOD:   # the work's own lines
             fraction = done / self.total
             self.lines.say(f"{self.label}: {done:.6g} of {self.total:.6g} {self.unit} "
                            f"({100 * fraction:.1f} %), {self.left(now)}")

@@ -175,3 +175,18 @@ def test_still_compiling_counts_the_whole_run_s_compiles(monkeypatch):
     compiles.on_end()                  # 14.0: the first mode, 4 s
     compiles.on_start(KERNEL)          # 20.0: the next mode
     assert compiles.under_way() == 7.0   # at 23.0: 4 + 3, not 3
+
+
+def test_a_run_s_first_plain_line_comes_a_period_after_it_started():
+    """The stream's last line may be long ago (its import): a run of 5 s still says nothing,
+    as before (a one-line error test met a progress line at 2 s)."""
+    clock, out = Clock(), io.StringIO()
+    lines = progress_module.Lines(out, clock)
+    clock.now = 100.0
+    bar = Progress(100.0, "arm-sim run release", clock=clock, lines=lines)
+    clock.now = 105.0
+    bar.update(5.0)
+    assert out.getvalue() == ""
+    clock.now = 100.0 + progress_module.PLAIN_PERIOD
+    bar.update(7.5)
+    assert out.getvalue().startswith("arm-sim run release: 7.5 of 100 s")
