@@ -5,8 +5,9 @@
 
 On the dds transport the `--ros-args` are read here and resolved as rclcpp/rclpy resolve them:
 every `/**` assignment (a parameter file's `/**:` section or a `-p`) in command-line order, then
-the node's own sections (`arm_sim:` or `/arm_sim:`), which therefore win. Prints a one-line
-status each second.
+the node's own sections (`arm_sim:` or `/arm_sim:`), which therefore win. Says at start what
+is on, prints a one-line status each second, and says at the end where it stopped and what it
+wrote (--quiet: warnings and errors only).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import time
 
 from . import transports
 from ..interface import NODE_NAME
+from ..physics.compiled.cache import log_pulse
 from ..physics.scene import MAX_DURATION
 from ..usage import DONE, REFUSED, ArgumentParser, UsageError, exit_as_main, one_line
 from .stop import Stop, stopped_while_starting
@@ -51,12 +53,12 @@ class _RosFormatter(logging.Formatter):
         return f"[{level}] [{record.created:.9f}] [{record.name}]: {record.getMessage()}"
 
 
-def run_dds(ros_argv: list, duration: float | None, status, stop=None) -> int:
+def run_dds(ros_argv: list, duration: float | None, status, stop=None, quiet=False) -> int:
     from .wire.messages import close_domains
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
-    configure_logging(ros["level"])
+    configure_logging(ros["level"] or ("warn" if quiet else None))
     name, namespace, rules = node_identity(ros["remap"], NODE_NAME)
     node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name, namespace=namespace,
                          remap=rules)   # a DiscoveryError is a UsageError: one line, exit 2
@@ -110,7 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="rclpy when it imports (auto), else dds")
     parser.add_argument("--duration", type=float, metavar="SECONDS",
                         help="stop after this much simulated time (default: run until Ctrl-C)")
-    parser.add_argument("--quiet", action="store_true", help="no status line each second")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no status line each second and no info lines: warnings and "
+                             "errors only (as --ros-args --log-level warn)")
     return parser
 
 
@@ -130,13 +134,15 @@ def main(argv=None, stop: Stop | None = None) -> int:
                              f"to {MAX_DURATION:g}")
         transport = transports.choose(args.transport)
         status = None if args.quiet else _print_status
+        log_pulse()          # a first compile at the first tick: "still compiling" each 10 s
         if transport == "rclpy":
             if stop.requested:            # rclpy.init takes the signals over: said now
                 print(stopped_while_starting(stop, "no recording was written"), file=sys.stderr)
                 return DONE
             from .transports.rclpy_transport import run
-            return run(["arm_sim_node", "--ros-args", *ros_argv], args.duration, status)
-        return run_dds(ros_argv, args.duration, status, stop)
+            quiet = ["--log-level", "warn"] if args.quiet else []     # a later one wins
+            return run(["arm_sim_node", "--ros-args", *quiet, *ros_argv], args.duration, status)
+        return run_dds(ros_argv, args.duration, status, stop, args.quiet)
     except (UsageError, ParameterRefused, transports.TransportUnavailable) as error:
         print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
         return REFUSED

@@ -23,11 +23,22 @@ def test_the_source_is_the_module_the_compiled_path_loads(scene, capsys, monkeyp
     monkeypatch.setenv("ARM_SIM_COMPILED", "0")
     sim = Simulator(load_scene(scene))
     assert text == build.module_source(sim.dynamics, sim._step)[0]
-    assert name_line == f"# {build.module_name(text)}.py in {tmp_path}"
+    assert name_line == (f"# {build.module_name(text)}.py: not compiled yet; its first compiled "
+                         f"run writes it into the kernel cache {tmp_path}")
     assert about.startswith(f"# scene {scene}: {sim.scene.method}, effects gravity")
     compile(text, name_line, "exec")                   # Python, whole
     assert "def run_books(" in text and "@njit(cache=True)" in text
     assert os.listdir(tmp_path) == []                  # nothing compiled, nothing written
+
+
+def test_the_header_says_whether_the_cache_holds_the_module(capsys, monkeypatch, tmp_path):
+    """It named a file in the cache that no run had written ("... .py in ~/.cache/...")."""
+    monkeypatch.setenv("ARM_SIM_CACHE", str(tmp_path))
+    name_line, _, text = printed(capsys, "--source", "release").split("\n", 2)
+    assert "not compiled yet" in name_line
+    (tmp_path / f"{build.module_name(text)}.py").write_text(text)     # as build.load writes it
+    assert printed(capsys, "--source", "release").split("\n", 1)[0] == (
+        f"# {build.module_name(text)}.py: in the kernel cache {tmp_path}")
 
 
 def test_the_source_says_which_path_runs_it(capsys, monkeypatch):
