@@ -28,7 +28,7 @@ stability plan's count is the floor and `max_substeps` the ceiling, said once wh
 cannot meet the tolerance, as is a tolerance that splitting does not reach. Compliant
 contact, free flight and the pieces up to a located switch are controlled apart. 0 turns
 the controller off (estimate only). Default (DEFAULT_TOLERANCE = 5e-5 per s): a 100 rad/s
-spin drifts 3.1e-7 of its energy over 5 s at h = 10 ms, 1.4e-6 at 1 ms.
+spin drifts 2.9e-7 of its energy over 5 s at h = 10 ms, 6.9e-7 at 1 ms.
 """
 from __future__ import annotations
 
