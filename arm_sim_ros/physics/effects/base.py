@@ -177,7 +177,7 @@ class Effect:
 
     def linear_decay(self) -> tuple:
         """Linear decay rates (1/s) of its extra states, integrated exactly where the method
-        allows (integrators.compile_exponential_step): x' = -rate x + the rest."""
+        allows (exponential.compile_exponential_step): x' = -rate x + the rest."""
         return (0.0,) * len(self.state)
 
     def stored_energy(self, arm, q, extra) -> float:

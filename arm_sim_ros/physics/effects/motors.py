@@ -148,7 +148,7 @@ class Motors(Effect):
 
     def linear_decay(self) -> tuple:
         """R/L of each winding: the currents' linear decay, integrated exactly by the
-        exponential RK4 (integrators.py) where the scene's method is rk4."""
+        exponential RK4 (stepping/exponential.py) where the scene runs it."""
         return tuple(r / l for r, l in zip(self.resistance, self.inductance)) if self.windings else ()
 
     def state_torques(self) -> tuple:
