@@ -10,7 +10,7 @@ a study of the exponential step with more of the winding's coupling in its exact
 integrated part (errors only: it takes scipy's expm per step).
 
     nice python benchmarks/bench_windings.py [--repeat 3] [--base DIR] [--tables stiff,...]
-        [--dcmotor] [--linear-parts]       (--tables '' --linear-parts: the study alone)
+        [--dcmotor] [--linear-parts]     (a study named alone runs alone; --tables adds to it)
 """
 from __future__ import annotations
 
@@ -350,13 +350,17 @@ def main() -> None:
     parser.add_argument("--long", type=float, default=20.0,
                         help="simulated s of the stiff table's compiled runs")
     parser.add_argument("--base", type=Path, help="another checkout (main's): its price beside")
-    parser.add_argument("--tables", default="convergence,books,tolerance,stiff",
-                        help="of convergence, books, tolerance, stiff ('': none, for "
-                             "--linear-parts or --dcmotor alone)")
+    parser.add_argument("--tables", help="of convergence, books, tolerance, stiff (all four "
+                                         "unless a study is named)")
     parser.add_argument("--dcmotor", action="store_true")
     parser.add_argument("--linear-parts", action="store_true",
                         help="the study of what else the exact part could hold (scipy)")
     args = parser.parse_args()
+    # A study named alone runs alone: its command reads as it is written, with no empty
+    # --tables argument to quote.
+    if args.tables is None:
+        args.tables = "" if args.dcmotor or args.linear_parts else \
+            "convergence,books,tolerance,stiff"
     chosen = [name for name in args.tables.split(",") if name]
     tables = {"convergence": convergence, "books": books_by_channel,
               "tolerance": lambda: under_tolerance(args.seconds, args.repeat),
