@@ -57,8 +57,12 @@ def read_urdf_file(path: str) -> str:
         raise SceneError(f"--urdf {path}: cannot read it ({reason})") from None
 
 
-def add_scene_arguments(parser) -> None:
-    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`) or a scene .yaml file")
+def add_scene_arguments(parser, scene_option: bool = True) -> None:
+    """--scene (unless the command takes the scene as its first argument), --urdf, --step,
+    --tolerance, --max-substeps and --set."""
+    if scene_option:
+        parser.add_argument("--scene", default="release",
+                            help="preset name (see `arm-sim scenes`) or a scene .yaml file")
     parser.add_argument("--urdf", metavar="FILE",
                         help="take the arm from a planar 2R URDF: links, inertias, joint and "
                              "effort limits, damping, friction; --scene gives the rest")

@@ -49,6 +49,10 @@ class Progress:
                   f"({100 * fraction:.1f} %), about {_duration(left)} left",
                   file=self.stream, flush=True)
 
+    def exclude(self, seconds: float) -> None:
+        """Leave out `seconds` spent compiling elsewhere (a worker process's first compile)."""
+        self.compiled -= seconds
+
     def working(self, now: float) -> float:
         """Seconds of the work itself so far: compiling left out."""
         return now - self.started - (compile_seconds() - self.compiled)

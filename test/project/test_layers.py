@@ -20,7 +20,7 @@ ORDER = {
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
              "recorder_link", "core", "transports", "main"],
     "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
-              "inspect", "batch", "urdf", "cli", "reference"],
+              "sweep", "inspect", "batch", "urdf", "cli", "reference"],
 }
 LAYERS = list(ORDER)
 # Third-party modules a layer or group must never import (its promise, in DESIGN.md).

@@ -1,0 +1,213 @@
+"""The picture beside a sweep's table (OUT.png): a heat map where two grid keys are numbers
+(one panel per value of the other grid keys; the median over a grid point's draws), with
+the samples that did not end ok marked, and the stability planner's bound drawn where one
+axis is step_size; else histograms of the figures (Monte Carlo), or a figure against the
+one grid key.
+"""
+from __future__ import annotations
+
+from itertools import product
+from math import inf, isfinite
+
+import numpy as np
+
+from ...physics.effects import scene_effects
+from ...physics.scene import SceneError
+from ...physics.stepping import stability
+from ...physics.stepping.integrators import INTEGRATORS
+from .plan import overrides
+from .table import PICTURE, beside
+
+REFERENCE_FIGURES = ("settle_time", "overshoot", "steady_state_error")
+MAX_PANELS = 6
+NOT_OK = {"diverged": "#222222", "fault": "#8b0000", "refused": "#bbbbbb"}
+
+
+def shown(sweep, columns: dict, plot) -> list:
+    """The columns the picture shows: --plot's, else the reference figures where any row
+    has them, else max_abs_residual."""
+    if plot:
+        names = [n.strip() for n in plot.split(",") if n.strip()]
+        unknown = [n for n in names if n not in columns]
+        if unknown:
+            raise SceneError(f"--plot {plot}: no column {unknown[0]}; columns: "
+                             f"{', '.join(columns)}")
+        return names
+    figures = [f"{name}_{joint}" for name in REFERENCE_FIGURES for joint in (1, 2)
+               if np.isfinite(columns.get(f"{name}_{joint}", np.array([np.nan]))).any()]
+    return figures or ["max_abs_residual"]
+
+
+def draw(out, sweep, columns: dict, plot=None):
+    """Write the picture beside `out`; returns its path."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = shown(sweep, columns, plot)
+    numeric = [v for v in sweep.plan.grid if len(v.values) > 1 and len(v.columns) == 1
+               and all(isinstance(x, (int, float)) for x in v.values)]
+    if len(numeric) >= 2:
+        figure = heat_maps(plt, sweep, columns, names[0], numeric)
+    elif sweep.plan.draws > 1 or not numeric:
+        figure = histograms(plt, columns, names)
+    else:
+        figure = against(plt, columns, names, numeric[0])
+    path = beside(out, PICTURE)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def heat_maps(plt, sweep, columns, name: str, numeric):
+    x_key, y_key = _axes(numeric)
+    others = [v for v in sweep.plan.grid if v not in (x_key, y_key)]
+    panels = list(product(*(v.values for v in others)))[:MAX_PANELS]
+    figure, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels) + 1, 4.6),
+                                squeeze=False, constrained_layout=True)
+    values, status = columns[name], columns["status"]
+    colour = _norm(values)
+    for ax, at in zip(axes[0], panels):
+        keep = np.ones(len(values), bool)
+        for v, value in zip(others, at):
+            keep &= _matches(columns, v, value)
+        grid = np.full((len(y_key.values), len(x_key.values)), np.nan)
+        bad = np.full(grid.shape, "", dtype=object)
+        for i, y in enumerate(y_key.values):
+            for j, x in enumerate(x_key.values):
+                cell = keep & (columns[x_key.key] == x) & (columns[y_key.key] == y)
+                grid[i, j] = np.nanmedian(values[cell]) if np.isfinite(values[cell]).any() \
+                    else np.nan
+                worst = [s for s in NOT_OK if s in [status[k] for k in np.flatnonzero(cell)]]
+                bad[i, j] = worst[0] if worst else ""
+        xs, ys = _edges(x_key.values), _edges(y_key.values)
+        mesh = ax.pcolormesh(xs, ys, grid, norm=colour, cmap="viridis")
+        for kind, shade in NOT_OK.items():
+            mask = np.where(bad == kind, 1.0, np.nan)
+            if np.isfinite(mask).any():
+                ax.pcolormesh(xs, ys, mask, cmap=_flat(shade), vmin=0, vmax=1)
+                ax.plot([], [], "s", color=shade, label=kind)
+        _planner(ax, sweep, x_key, y_key, others, at)
+        _scale(ax, x_key, y_key)
+        ax.set_xlabel(x_key.key)
+        ax.set_ylabel(y_key.key)
+        ax.set_title(", ".join(f"{v.key} = {_text(value)}" for v, value in zip(others, at))
+                     or sweep.base.name, fontsize=10)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="lower left", fontsize=8, framealpha=0.85)
+    figure.colorbar(mesh, ax=axes[0].tolist(), label=name + (" (median of the draws)"
+                                                             if sweep.plan.draws > 1 else ""))
+    return figure
+
+
+def histograms(plt, columns, names):
+    figures = sorted({n[:-2] if n[-2:] in ("_1", "_2") else n for n in names},
+                     key=lambda n: [m.startswith(n) for m in names].index(True))
+    figure, axes = plt.subplots(1, len(figures), figsize=(4.6 * len(figures), 3.8),
+                                squeeze=False, constrained_layout=True)
+    ok = np.array([s == "ok" for s in columns["status"]])
+    for ax, figure_name in zip(axes[0], figures):
+        for column in [n for n in names if n == figure_name or n[:-2] == figure_name]:
+            values = columns[column][ok]
+            finite = values[np.isfinite(values)]
+            if len(finite):
+                ax.hist(finite, bins=min(40, max(5, len(finite) // 5)), histtype="step",
+                        linewidth=1.5, label=f"{column} (n = {len(finite)})")
+        ax.set_xlabel(figure_name)
+        ax.set_ylabel("samples")
+        ax.legend(fontsize=8)
+    figure.suptitle(f"{int(ok.sum())} of {len(ok)} samples ok", fontsize=10)
+    return figure
+
+
+def against(plt, columns, names, key):
+    figure, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
+    for name in names:
+        ax.plot(columns[key.key], columns[name], "o-", label=name)
+    _scale(ax, key, None)
+    ax.set_xlabel(key.key)
+    ax.legend(fontsize=8)
+    return figure
+
+
+def _axes(numeric):
+    """(x, y) of the heat map: step_size across where it is varied, else the first two."""
+    steps = [v for v in numeric if v.field == "step_size"]
+    x = steps[0] if steps else numeric[0]
+    y = next(v for v in numeric if v is not x)
+    return x, y
+
+
+def _matches(columns, v, value):
+    if len(v.columns) == 1:
+        return np.asarray(columns[v.key], dtype=object) == value
+    return np.all([np.asarray(columns[c]) == x for c, x in zip(v.columns, value)], axis=0)
+
+
+def _planner(ax, sweep, x_key, y_key, others, at) -> None:
+    """The step size at which the stability planner starts sub-steps (its bound: h times
+    the stiff effects' largest eigenvalue magnitude reaches the method's limit), for each
+    value along the other axis."""
+    if "step_size" not in (x_key.field, y_key.field):
+        return
+    h_key, k_key = (x_key, y_key) if x_key.field == "step_size" else (y_key, x_key)
+    found = []
+    for k in k_key.values:
+        values = [k, *at]
+        try:
+            scene = sweep.base.replace(**overrides(sweep.base, [k_key, *others], values))
+        except SceneError:
+            continue
+        ratio, limit, _ = stability.bound(INTEGRATORS[scene.method], scene_effects(scene),
+                                          scene.arm, 1.0)
+        found.append((limit / ratio if ratio > 0 else inf, k))
+    points = [(h, k) for h, k in found if isfinite(h)]
+    if points:
+        h, k = zip(*points)
+        xy = (h, k) if h_key is x_key else (k, h)
+        ax.plot(*xy, "w--", linewidth=2, label="planner's stability bound")
+        ax.set_xlim(*_edges(x_key.values)[[0, -1]])
+        ax.set_ylim(*_edges(y_key.values)[[0, -1]])
+
+
+def _edges(values) -> np.ndarray:
+    """Cell edges around grid values: geometric midpoints on a log grid."""
+    v = np.asarray(values, dtype=float)
+    if len(v) < 2:
+        return np.array([v[0] - 0.5, v[0] + 0.5])
+    if _is_log(v):
+        mid = np.sqrt(v[1:] * v[:-1])
+        return np.concatenate([[v[0] ** 2 / mid[0]], mid, [v[-1] ** 2 / mid[-1]]])
+    mid = (v[1:] + v[:-1]) / 2
+    return np.concatenate([[2 * v[0] - mid[0]], mid, [2 * v[-1] - mid[-1]]])
+
+
+def _is_log(v) -> bool:
+    v = np.asarray(v, dtype=float)
+    return len(v) > 2 and bool(np.all(v > 0)) and np.ptp(np.log(v[1:] / v[:-1])) < 1e-6 \
+        and not np.ptp(np.diff(v)) < 1e-9 * np.abs(v).max()
+
+
+def _scale(ax, x_key, y_key) -> None:
+    if _is_log(x_key.values):
+        ax.set_xscale("log")
+    if y_key is not None and _is_log(y_key.values):
+        ax.set_yscale("log")
+
+
+def _norm(values):
+    from matplotlib.colors import LogNorm, Normalize
+    finite = values[np.isfinite(values)]
+    positive = finite[finite > 0]
+    if len(positive) == len(finite) and len(positive) and positive.max() > 100 * positive.min():
+        return LogNorm(positive.min(), positive.max())
+    return Normalize(*(finite.min(), finite.max()) if len(finite) else (0, 1))
+
+
+def _flat(shade):
+    from matplotlib.colors import ListedColormap
+    return ListedColormap([shade])
+
+
+def _text(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)

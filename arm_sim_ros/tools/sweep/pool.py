@@ -1,0 +1,101 @@
+"""Where a sweep's blocks run: here (one worker), on local processes (every core, no Dask),
+or on a Dask cluster (--scheduler). Each yields the blocks as they finish, in whatever
+order; a block's rows do not depend on where or when it ran (rows.py), so neither does the
+table.
+
+A stop (Ctrl-C, SIGTERM: tools/signals.py) ends the work: blocks not yet started are
+cancelled, and the local processes abandon the blocks under way at their next chunk of
+samples (a `halt` event they share), so the sweep keeps exactly the blocks finished. Local
+processes ignore SIGINT: a Ctrl-C at the terminal reaches the whole process group, and the
+sweep, not each worker, decides what is kept.
+"""
+from __future__ import annotations
+
+import signal
+
+from .rows import Task, run_task
+
+CHECK_SECONDS = 0.2          # how often a wait looks at a stop request
+_halt = None                 # this worker process's halt event (set by the sweep's process)
+
+
+class Halted(BaseException):
+    """The sweep stopped: this block is abandoned (a BaseException, as KeyboardInterrupt
+    is, so that no `except Exception` in the engine takes it for a sample's fault)."""
+
+
+def _start_worker(halt) -> None:
+    global _halt
+    _halt = halt
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _halted() -> None:
+    if _halt is not None and _halt.is_set():
+        raise Halted
+
+
+def run_in_worker(task: Task):
+    return run_task(task, _halted)
+
+
+def here(tasks, stop):
+    """The blocks one after another in this process; a stop abandons the block under way
+    (signals.py: the handler raises inside it)."""
+    from ..signals import StepInterrupted
+
+    for task in tasks:
+        if stop.requested:
+            return
+        stop.within_step = True
+        try:
+            done = run_task(task)
+        except StepInterrupted:
+            return
+        finally:
+            stop.within_step = False
+        yield done
+
+
+def processes(tasks, workers: int, stop):
+    """The blocks on `workers` local processes (spawned: each imports and compiles afresh,
+    once, whatever the parent holds)."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from multiprocessing import get_context
+
+    context = get_context("spawn")
+    halt = context.Event()
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
+                             initargs=(halt,)) as pool:
+        waiting = {pool.submit(run_in_worker, task) for task in tasks}
+        try:
+            while waiting and not stop.requested:
+                finished, waiting = wait(waiting, CHECK_SECONDS, FIRST_COMPLETED)
+                for future in finished:
+                    yield future.result()
+        finally:
+            halt.set()
+            for future in waiting:
+                future.cancel()
+
+
+def cluster(tasks, scheduler: str, stop):
+    """The blocks on the Dask cluster at `scheduler` (the fit's connection: one line when
+    Dask is not installed or nobody answers)."""
+    from distributed import wait
+
+    from ..fit.command import connected
+
+    with connected(scheduler) as client:
+        waiting = set(client.map(run_task, tasks, pure=False))
+        try:
+            while waiting and not stop.requested:
+                try:
+                    finished, pending = wait(list(waiting), CHECK_SECONDS, "FIRST_COMPLETED")
+                except TimeoutError:        # none finished yet: look at the stop again
+                    continue
+                waiting = set(pending)
+                for future in finished:
+                    yield future.result()
+        finally:
+            client.cancel(list(waiting))
