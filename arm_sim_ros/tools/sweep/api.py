@@ -67,7 +67,9 @@ def sweep(scene="release", vary=(), *, samples: int | None = None, seed: int = 0
     workers = os.cpu_count() or 1 if workers is None else workers
     if workers < 1:
         raise SceneError(f"workers {workers} must be at least 1")
-    result = execute(setup, out, resume, workers, scheduler)
+    from .pool import connect
+    client = connect(scheduler) if scheduler else None
+    result = execute(setup, out, resume, workers, client)
     if out is not None and result.complete:
         from .picture import draw
         draw(out, setup, result.columns, plot)

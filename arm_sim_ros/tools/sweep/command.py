@@ -84,10 +84,12 @@ def cmd_sweep(args) -> int:
     if args.workers < 1:
         from ...usage import UsageError
         raise UsageError(f"--workers {args.workers} must be at least 1")
+    from .pool import connect
+    client = connect(args.scheduler) if args.scheduler else None    # before any file
     out = check_outputs(args)
     label = f"arm-sim sweep {base.name}"
     with StopOnSignals() as stop, Progress(sweep.plan.count, label, unit="samples") as progress:
-        result = execute(sweep, out, args.resume, args.workers, args.scheduler, stop, progress)
+        result = execute(sweep, out, args.resume, args.workers, client, stop, progress)
     if result.complete:
         from .picture import draw
         picture = draw(out, sweep, result.columns, args.plot)

@@ -79,14 +79,19 @@ def processes(tasks, workers: int, stop):
                 future.cancel()
 
 
-def cluster(tasks, scheduler: str, stop):
-    """The blocks on the Dask cluster at `scheduler` (the fit's connection: one line when
-    Dask is not installed or nobody answers)."""
-    from distributed import wait
-
+def connect(scheduler: str):
+    """A Dask client of the cluster at `scheduler`, or one line (UsageError) when Dask is
+    not installed, nobody answers or it is no Dask scheduler: the fit's connection."""
     from ..fit.command import connected
 
-    with connected(scheduler) as client:
+    return connected(scheduler)
+
+
+def cluster(tasks, client, stop):
+    """The blocks on the Dask cluster of `client` (connect), which it closes."""
+    from distributed import wait
+
+    with client:
         waiting = set(client.map(run_task, tasks, pure=False))
         try:
             while waiting and not stop.requested:

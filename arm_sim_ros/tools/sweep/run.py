@@ -19,6 +19,7 @@ from .rows import Task, header
 from . import pool, table
 
 CHECKPOINT_SECONDS = 10.0     # wall seconds between rewrites of the table while it runs
+#                               (the first finished block is written at once)
 FORMAT = 1                    # the table's layout; a resume needs the same
 
 
@@ -70,10 +71,11 @@ class Outcome:
                                                                  "fault")}
 
 
-def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, scheduler=None,
+def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, client=None,
             stop=None, progress=None) -> Outcome:
-    """Run the sweep; `out` (a path, or None: nothing written) gets the table, checkpoints
-    and its sidecar. `stop.requested` (signals.StopOnSignals) ends it early."""
+    """Run the sweep; `out` (a path, or None: nothing written) gets the table (as soon as
+    a block is done, then every CHECKPOINT_SECONDS and at the end) and its sidecar.
+    `client`: a Dask cluster's (pool.connect) to run on, else local `workers`. `stop.requested` (signals.StopOnSignals) ends it early."""
     stop = stop if stop is not None else _NeverStop()
     columns = sweep.columns
     lines, runs = {}, []
@@ -82,12 +84,12 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, sche
         lines = table.read_done(out, columns)
         runs = _previous_runs(out)
     tasks = sweep.tasks(lines)
-    where = (f"Dask cluster {scheduler}" if scheduler else
+    where = (f"the Dask cluster at {client.scheduler.address}" if client is not None else
              f"{min(workers, len(tasks))} local processes" if workers > 1 and len(tasks) > 1
              else "this process")
-    started = last = time.perf_counter()
+    started, last = time.perf_counter(), float("-inf")
     ran, compiling, failed = 0, 0.0, True
-    blocks = (pool.cluster(tasks, scheduler, stop) if scheduler else
+    blocks = (pool.cluster(tasks, client, stop) if client is not None else
               pool.processes(tasks, min(workers, len(tasks)), stop)
               if workers > 1 and len(tasks) > 1 else pool.here(tasks, stop))
     try:
