@@ -72,6 +72,9 @@ class Scene:
     # what a run computes of its own error (trust/unestimated.py): global (the shadow and
     # its checks) or off (the steps alone: no error estimate, so tolerance 0)
     estimate: str = "global"
+    # on: a step beyond the method's stability limit is split into sub-steps (stability.py);
+    # off: every step taken whole, as a stability study needs to find where it diverges
+    stability_plan: str = "on"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -110,6 +113,10 @@ class Scene:
             raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
                              f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
                              "out (estimate off alone sets it to 0)")
+        if self.stability_plan not in ("on", "off"):
+            raise SceneError(f"stability_plan {self.stability_plan!r} is unknown; choose on "
+                             "(sub-steps where a step would be unstable, the default) or off "
+                             "(every step whole: a stability study)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")

@@ -7,7 +7,6 @@ one grid key.
 from __future__ import annotations
 
 from itertools import product
-from math import inf, isfinite
 
 import numpy as np
 
@@ -66,7 +65,7 @@ def heat_maps(plt, sweep, columns, name: str, numeric):
     figure, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels) + 1, 4.6),
                                 squeeze=False, constrained_layout=True)
     values, status = columns[name], columns["status"]
-    colour = _norm(values)
+    colour = _norm(values[np.array([s == "ok" for s in status], dtype=bool)])
     for ax, at in zip(axes[0], panels):
         keep = np.ones(len(values), bool)
         for v, value in zip(others, at):
@@ -76,10 +75,12 @@ def heat_maps(plt, sweep, columns, name: str, numeric):
         for i, y in enumerate(y_key.values):
             for j, x in enumerate(x_key.values):
                 cell = keep & (columns[x_key.key] == x) & (columns[y_key.key] == y)
-                grid[i, j] = np.nanmedian(values[cell]) if np.isfinite(values[cell]).any() \
-                    else np.nan
-                worst = [s for s in NOT_OK if s in [status[k] for k in np.flatnonzero(cell)]]
+                outcomes = [status[k] for k in np.flatnonzero(cell)]
+                worst = [s for s in NOT_OK if s in outcomes]
                 bad[i, j] = worst[0] if worst else ""
+                good = values[cell][[s == "ok" for s in outcomes]]
+                grid[i, j] = np.median(good[np.isfinite(good)]) if np.isfinite(good).any() \
+                    else np.nan
         xs, ys = _edges(x_key.values), _edges(y_key.values)
         mesh = ax.pcolormesh(xs, ys, grid, norm=colour, cmap="viridis")
         for kind, shade in NOT_OK.items():
@@ -95,7 +96,7 @@ def heat_maps(plt, sweep, columns, name: str, numeric):
                      or sweep.base.name, fontsize=10)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="lower left", fontsize=8, framealpha=0.85)
-    figure.colorbar(mesh, ax=axes[0].tolist(), label=name + (" (median of the draws)"
+    figure.colorbar(mesh, ax=axes[0].tolist(), label=name + (" (median of the draws ok)"
                                                              if sweep.plan.draws > 1 else ""))
     return figure
 
@@ -145,29 +146,46 @@ def _matches(columns, v, value):
 
 
 def _planner(ax, sweep, x_key, y_key, others, at) -> None:
-    """The step size at which the stability planner starts sub-steps (its bound: h times
-    the stiff effects' largest eigenvalue magnitude reaches the method's limit), for each
-    value along the other axis."""
+    """The largest step the stability planner takes whole (no sub-steps: every stiff
+    effect's eigenvalues inside the method's stability region, at any pose), for each value
+    along the other axis: its bound, drawn over the map."""
     if "step_size" not in (x_key.field, y_key.field):
         return
     h_key, k_key = (x_key, y_key) if x_key.field == "step_size" else (y_key, x_key)
+    low, high = min(h_key.values) / 100, max(h_key.values) * 100
     found = []
     for k in k_key.values:
-        values = [k, *at]
         try:
-            scene = sweep.base.replace(**overrides(sweep.base, [k_key, *others], values))
+            scene = sweep.base.replace(**overrides(sweep.base, [k_key, *others], [k, *at]))
         except SceneError:
             continue
-        ratio, limit, _ = stability.bound(INTEGRATORS[scene.method], scene_effects(scene),
-                                          scene.arm, 1.0)
-        found.append((limit / ratio if ratio > 0 else inf, k))
-    points = [(h, k) for h, k in found if isfinite(h)]
+        found.append((largest_whole_step(scene, low, high), k))
+    points = [(h, k) for h, k in found if h is not None]
     if points:
         h, k = zip(*points)
-        xy = (h, k) if h_key is x_key else (k, h)
-        ax.plot(*xy, "w--", linewidth=2, label="planner's stability bound")
+        ax.plot(*((h, k) if h_key is x_key else (k, h)), "w--", linewidth=2,
+                label="planner's stability bound")
         ax.set_xlim(*_edges(x_key.values)[[0, -1]])
         ax.set_ylim(*_edges(y_key.values)[[0, -1]])
+
+
+def largest_whole_step(scene, low: float, high: float):
+    """The largest h in [low, high] the planner takes without sub-steps (bisected in log
+    h, to 0.1 %); None where even `low` needs them or `high` does not."""
+    effects, arm = scene_effects(scene), scene.arm
+    tableau = INTEGRATORS[scene.method]
+
+    def whole(h):
+        return stability.planned(tableau, effects, arm, h)[2] == 1
+
+    if not whole(low) or whole(high):
+        return None
+    for _ in range(60):
+        if high / low < 1.001:
+            break
+        middle = (low * high) ** 0.5
+        low, high = (middle, high) if whole(middle) else (low, middle)
+    return low
 
 
 def _edges(values) -> np.ndarray:
@@ -183,9 +201,9 @@ def _edges(values) -> np.ndarray:
 
 
 def _is_log(v) -> bool:
+    """Values drawn on a log axis: all positive, spanning 20x or more."""
     v = np.asarray(v, dtype=float)
-    return len(v) > 2 and bool(np.all(v > 0)) and np.ptp(np.log(v[1:] / v[:-1])) < 1e-6 \
-        and not np.ptp(np.diff(v)) < 1e-9 * np.abs(v).max()
+    return len(v) > 2 and bool(np.all(v > 0)) and v.max() >= 20 * v.min()
 
 
 def _scale(ax, x_key, y_key) -> None:
