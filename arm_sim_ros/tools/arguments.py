@@ -65,7 +65,7 @@ def add_scene_arguments(parser, scene_option: bool = True) -> None:
                             help="preset name (see `arm-sim scenes`) or a scene .yaml file")
     parser.add_argument("--urdf", metavar="FILE",
                         help="take the arm from a planar 2R URDF: links, inertias, joint and "
-                             "effort limits, damping, friction; --scene gives the rest")
+                             "effort limits, damping, friction; the scene gives the rest")
     parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
     parser.add_argument("--tolerance", metavar="TOL",
                         help="local error per simulated second a step may make before it is "

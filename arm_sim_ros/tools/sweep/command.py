@@ -56,7 +56,7 @@ def add_parser(subparsers) -> None:
                    help="off (the default in a sweep: the steps alone) or global (each "
                         "sample's error estimate, at its price)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="local processes (default and most: the CPU count; 1: this process)")
+                   help="local processes (default: the CPU count; 1: this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://127.0.0.1:8786 (pip install "
                         "'arm_sim_ros[fit]')")
