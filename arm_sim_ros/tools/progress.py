@@ -24,6 +24,7 @@ class Progress:
         self.done = 0.0
         self.bar = None
         self.compiled = compile_seconds()     # compiling before the work started
+        self.own = None                       # the work's seconds, where its caller measures
 
     def update(self, done: float) -> None:
         self.done = done
@@ -49,12 +50,15 @@ class Progress:
                   f"({100 * fraction:.1f} %), about {_duration(left)} left",
                   file=self.stream, flush=True)
 
-    def exclude(self, seconds: float) -> None:
-        """Leave out `seconds` spent compiling elsewhere (a worker process's first compile)."""
-        self.compiled -= seconds
+    def measured(self, seconds: float) -> None:
+        """The work's own wall seconds so far, as its caller measured them (work done in
+        other processes, their compiling left out): the time left is paced by them."""
+        self.own = seconds
 
     def working(self, now: float) -> float:
         """Seconds of the work itself so far: compiling left out."""
+        if self.own is not None:
+            return self.own
         return now - self.started - (compile_seconds() - self.compiled)
 
     def close(self) -> None:

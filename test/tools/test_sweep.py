@@ -112,3 +112,36 @@ def test_scheduler_without_dask_is_one_line_naming_the_extra(capsys, tmp_path, m
                      "--scheduler", "tcp://127.0.0.1:1", "-o", str(tmp_path / "x.csv")])
     err = capsys.readouterr().err
     assert code == 2 and "arm_sim_ros[fit]" in err and err.count("\n") == 1, err
+
+
+def test_the_time_left_is_paced_by_the_blocks_own_work_a_first_compile_left_out(monkeypatch):
+    """Blocks run in worker processes; each says how long it took and how much of that was
+    compiling. The progress is paced by the work alone: a first block that spent 8 of its
+    10 s compiling counts 2 s."""
+    from dataclasses import replace
+
+    from arm_sim_ros.tools.sweep import pool, run
+    sweep = make_sweep(load_scene(), ["gravity=1;2;3"], duration=0.01)
+    blocks = [run_task(task) for task in sweep.tasks()]
+    timed = [replace(b, seconds=10.0 if k == 0 else 2.0, compiling=8.0 if k == 0 else 0.0)
+             for k, b in enumerate(blocks)]
+    monkeypatch.setattr(pool, "here", lambda tasks, stop: iter(timed))
+
+    class Seen:
+        def __init__(self):
+            self.paced, self.done = [], []
+
+        def measured(self, seconds):
+            self.paced.append(seconds)
+
+        def update(self, done):
+            self.done.append(done)
+
+    seen = Seen()
+    result = run.execute(sweep, progress=seen)
+    assert result.complete and result.compiling == 8.0
+    assert seen.paced == [2.0, 4.0, 6.0] and seen.done == [1, 2, 3]
+    from arm_sim_ros.tools.progress import Progress
+    progress = Progress(3, "arm-sim sweep", unit="samples", clock=lambda: 100.0)
+    progress.measured(2.0)
+    assert progress.working(100.0) == 2.0                  # what the time left is paced by

@@ -49,7 +49,7 @@ def draw(out, sweep, columns: dict, plot=None):
     if len(numeric) >= 2:
         figure = heat_maps(plt, sweep, columns, names[0], numeric)
     elif sweep.plan.draws > 1 or not numeric:
-        figure = histograms(plt, columns, names)
+        figure = distributions(plt, sweep, columns, names)
     else:
         figure = against(plt, columns, names, numeric[0])
     path = beside(out, PICTURE)
@@ -101,24 +101,46 @@ def heat_maps(plt, sweep, columns, name: str, numeric):
     return figure
 
 
-def histograms(plt, columns, names):
-    figures = sorted({n[:-2] if n[-2:] in ("_1", "_2") else n for n in names},
-                     key=lambda n: [m.startswith(n) for m in names].index(True))
-    figure, axes = plt.subplots(1, len(figures), figsize=(4.6 * len(figures), 3.8),
+def distributions(plt, sweep, columns, names):
+    """Empirical CDFs of each figure shown, of the samples that ended ok: a colour per grid
+    point (up to MAX_PANELS), a line style per joint."""
+    figures = list(dict.fromkeys(n[:-2] if n[-2:] in ("_1", "_2") else n for n in names))
+    figure, axes = plt.subplots(1, len(figures), figsize=(4.8 * len(figures), 4.0),
                                 squeeze=False, constrained_layout=True)
-    ok = np.array([s == "ok" for s in columns["status"]])
+    ok = np.array([s == "ok" for s in columns["status"]], dtype=bool)
+    point = columns["index"].astype(int) // sweep.plan.draws
+    shown_points = sorted(set(point.tolist()))[:MAX_PANELS]
     for ax, figure_name in zip(axes[0], figures):
-        for column in [n for n in names if n == figure_name or n[:-2] == figure_name]:
-            values = columns[column][ok]
-            finite = values[np.isfinite(values)]
-            if len(finite):
-                ax.hist(finite, bins=min(40, max(5, len(finite) // 5)), histtype="step",
-                        linewidth=1.5, label=f"{column} (n = {len(finite)})")
-        ax.set_xlabel(figure_name)
-        ax.set_ylabel("samples")
-        ax.legend(fontsize=8)
-    figure.suptitle(f"{int(ok.sum())} of {len(ok)} samples ok", fontsize=10)
+        for p, colour in zip(shown_points, plt.rcParams["axes.prop_cycle"].by_key()["color"]):
+            for column in [n for n in names if n == figure_name or n[:-2] == figure_name]:
+                values = np.sort(columns[column][ok & (point == p)])
+                values = values[np.isfinite(values)]
+                if not len(values):
+                    continue
+                style = "--" if column.endswith("_2") else "-"
+                ax.step(values, np.arange(1, len(values) + 1) / len(values), where="post",
+                        color=colour, linestyle=style,
+                        label=f"{_point_label(sweep, p)}{column[-1:] if column != figure_name else ''}")
+        ax.set_xlabel(figure_name + _unit(figure_name))
+        ax.set_ylabel("fraction of samples at or below")
+        ax.set_ylim(0, 1.02)
+        ax.legend(fontsize=7)
+    figure.suptitle(f"{int(ok.sum())} of {len(ok)} samples ok; solid: joint 1, dashed: joint 2"
+                    if any(n.endswith("_2") for n in names) else
+                    f"{int(ok.sum())} of {len(ok)} samples ok", fontsize=10)
     return figure
+
+
+def _point_label(sweep, point: int) -> str:
+    """The grid point's values, e.g. `command_delay = 0.002, joint `."""
+    values = sweep.plan.values(point * sweep.plan.draws)
+    grid = [f"{v.key} = {_text(x)}" for v, x in zip(sweep.plan.varies, values) if not v.drawn]
+    return (", ".join(grid) + ", joint ") if grid else "joint "
+
+
+def _unit(figure_name: str) -> str:
+    from .summary import UNITS
+    return f" ({UNITS[figure_name]})" if figure_name in UNITS else ""
 
 
 def against(plt, columns, names, key):

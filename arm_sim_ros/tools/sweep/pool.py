@@ -1,7 +1,7 @@
 """Where a sweep's blocks run: here (one worker), on local processes (every core, no Dask),
 or on a Dask cluster (--scheduler). Each yields the blocks as they finish, in whatever
-order; a block's rows do not depend on where or when it ran (rows.py), so neither does the
-table.
+order (and None every CHECK_SECONDS while none does: the progress goes on); a block's rows
+do not depend on where or when it ran (rows.py), so neither does the table.
 
 A stop (Ctrl-C, SIGTERM: tools/signals.py) ends the work: blocks not yet started are
 cancelled, and the local processes abandon the blocks under way at their next chunk of
@@ -73,6 +73,8 @@ def processes(tasks, workers: int, stop):
                 finished, waiting = wait(waiting, CHECK_SECONDS, FIRST_COMPLETED)
                 for future in finished:
                     yield future.result()
+                if not finished:
+                    yield None
         finally:
             halt.set()
             for future in waiting:
@@ -98,6 +100,7 @@ def cluster(tasks, client, stop):
                 try:
                     finished, pending = wait(list(waiting), CHECK_SECONDS, "FIRST_COMPLETED")
                 except TimeoutError:        # none finished yet: look at the stop again
+                    yield None
                     continue
                 waiting = set(pending)
                 for future in finished:

@@ -84,22 +84,31 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
         lines = table.read_done(out, columns)
         runs = _previous_runs(out)
     tasks = sweep.tasks(lines)
-    where = (f"the Dask cluster at {client.scheduler.address}" if client is not None else
-             f"{min(workers, len(tasks))} local processes" if workers > 1 and len(tasks) > 1
-             else "this process")
+    local = min(workers, len(tasks)) if workers > 1 and len(tasks) > 1 else 1
+    if client is not None:
+        parallel = max(1, sum(w.get("nthreads", 1) for w in
+                              client.scheduler_info().get("workers", {}).values()))
+        where = f"the Dask cluster at {client.scheduler.address} ({parallel} threads)"
+    else:
+        parallel = local
+        where = f"{local} local processes" if local > 1 else "this process"
     started, last = time.perf_counter(), float("-inf")
-    ran, compiling, failed = 0, 0.0, True
+    ran, compiling, working, failed = 0, 0.0, 0.0, True
     blocks = (pool.cluster(tasks, client, stop) if client is not None else
-              pool.processes(tasks, min(workers, len(tasks)), stop)
-              if workers > 1 and len(tasks) > 1 else pool.here(tasks, stop))
+              pool.processes(tasks, local, stop) if local > 1 else pool.here(tasks, stop))
     try:
         for done in blocks:
+            if done is None:                   # none finished yet
+                if progress is not None:
+                    progress.update(ran)
+                continue
             for row in done.rows:
                 lines.setdefault(row[0], table.line(row))
             ran += done.stop - done.first
             compiling += done.compiling
-            if progress is not None:
-                progress.exclude(done.compiling / max(1, min(workers, len(tasks))))
+            working += done.seconds - done.compiling
+            if progress is not None:         # paced by the blocks' work, compiles left out
+                progress.measured(working / parallel)
                 progress.update(ran)
             if out is not None and time.perf_counter() - last > CHECKPOINT_SECONDS:
                 _save(out, sweep, lines, runs, False, ran, time.perf_counter() - started,
