@@ -13,7 +13,7 @@ import arm_sim_ros
 from arm_sim_ros.physics.metrics import NAMES
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.tools import cli
-from arm_sim_ros.tools.sweep import table
+from arm_sim_ros.tools.sweep import pool, table
 from arm_sim_ros.tools.sweep.api import make_sweep
 from arm_sim_ros.tools.sweep.rows import run_task
 
@@ -29,11 +29,14 @@ def pure_python(monkeypatch):
     monkeypatch.setenv("ARM_SIM_COMPILED", "0")       # compiling is not what these test
 
 
-def test_the_table_is_the_same_bytes_on_one_or_two_processes_in_any_order_and_again():
+def test_the_table_is_the_same_bytes_on_one_or_two_processes_in_any_order_and_again(
+        monkeypatch):
     once = arm_sim_ros.sweep(**SERVO, workers=1)
     assert once.complete and once.counts["ok"] == 6
     assert arm_sim_ros.sweep(**SERVO, workers=1).text == once.text
-    assert arm_sim_ros.sweep(**SERVO, workers=2).text == once.text
+    monkeypatch.setattr(pool, "SPAWN_WORTH", -1.0)     # processes even for so little work
+    two = arm_sim_ros.sweep(**SERVO, workers=2)
+    assert two.text == once.text and two.workers == "2 local processes"
     sweep = make_sweep(load_scene("servo_reach"), SERVO["vary"], 3, 11, duration=0.05)
     tasks = sweep.tasks()
     assert len(tasks) == 6                             # blocks of one: order can matter
@@ -120,7 +123,7 @@ def test_the_time_left_is_paced_by_the_blocks_own_work_a_first_compile_left_out(
     10 s compiling counts 2 s."""
     from dataclasses import replace
 
-    from arm_sim_ros.tools.sweep import pool, run
+    from arm_sim_ros.tools.sweep import run
     sweep = make_sweep(load_scene(), ["gravity=1;2;3"], duration=0.01)
     blocks = [run_task(task) for task in sweep.tasks()]
     timed = [replace(b, seconds=10.0 if k == 0 else 2.0, compiling=8.0 if k == 0 else 0.0)
@@ -145,3 +148,13 @@ def test_the_time_left_is_paced_by_the_blocks_own_work_a_first_compile_left_out(
     progress = Progress(3, "arm-sim sweep", unit="samples", clock=lambda: 100.0)
     progress.measured(2.0)
     assert progress.working(100.0) == 2.0                  # what the time left is paced by
+
+
+def test_a_small_sweep_stays_in_its_process_a_long_one_spreads(monkeypatch):
+    """Starting processes costs seconds: the first block runs here, and the rest go to
+    processes only where they would take longer than that here."""
+    small = arm_sim_ros.sweep("release", {"gravity": "1;2;3"}, duration=0.01, workers=2)
+    assert small.workers == "this process" and small.complete
+    monkeypatch.setattr(pool, "SPAWN_WORTH", 0.0)
+    spread = arm_sim_ros.sweep("release", {"gravity": "1;2;3"}, duration=0.01, workers=2)
+    assert spread.workers == "2 local processes" and spread.text == small.text

@@ -16,6 +16,7 @@ import signal
 from .rows import Task, run_task
 
 CHECK_SECONDS = 0.2          # how often a wait looks at a stop request
+SPAWN_WORTH = 5.0            # seconds of work left (one process) that pay for starting more
 _halt = None                 # this worker process's halt event (set by the sweep's process)
 
 
@@ -55,6 +56,23 @@ def here(tasks, stop):
         finally:
             stop.within_step = False
         yield done
+
+
+def every_core(tasks, workers: int, stop, used: dict):
+    """The first block here; the rest on `workers` local processes where they would take
+    more than SPAWN_WORTH seconds here (each new process imports and loads its kernels
+    first: a small sweep is done sooner without). `used["processes"]`: how many run it."""
+    first = None
+    for first in here(tasks[:1], stop):
+        yield first
+    if first is None or len(tasks) == 1:
+        return
+    left = (first.seconds - first.compiling) * (len(tasks) - 1)
+    if left <= SPAWN_WORTH or len(tasks) == 2:
+        yield from here(tasks[1:], stop)
+        return
+    used["processes"] = min(workers, len(tasks) - 1)
+    yield from processes(tasks[1:], used["processes"], stop)
 
 
 def processes(tasks, workers: int, stop):

@@ -84,18 +84,17 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
         lines = table.read_done(out, columns)
         runs = _previous_runs(out)
     tasks = sweep.tasks(lines)
-    local = min(workers, len(tasks)) if workers > 1 and len(tasks) > 1 else 1
+    used = {"processes": 1}                # where the blocks run: pool.every_core says
     if client is not None:
-        parallel = max(1, sum(w.get("nthreads", 1) for w in
-                              client.scheduler_info().get("workers", {}).values()))
-        where = f"the Dask cluster at {client.scheduler.address} ({parallel} threads)"
+        used["address"] = client.scheduler.address
+        used["processes"] = max(1, sum(w.get("nthreads", 1) for w in
+                                       client.scheduler_info().get("workers", {}).values()))
+        blocks = pool.cluster(tasks, client, stop)
     else:
-        parallel = local
-        where = f"{local} local processes" if local > 1 else "this process"
+        blocks = (pool.every_core(tasks, workers, stop, used) if workers > 1
+                  else pool.here(tasks, stop))
     started, last = time.perf_counter(), float("-inf")
     ran, compiling, working, failed = 0, 0.0, 0.0, True
-    blocks = (pool.cluster(tasks, client, stop) if client is not None else
-              pool.processes(tasks, local, stop) if local > 1 else pool.here(tasks, stop))
     try:
         for done in blocks:
             if done is None:                   # none finished yet
@@ -108,20 +107,28 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
             compiling += done.compiling
             working += done.seconds - done.compiling
             if progress is not None:         # paced by the blocks' work, compiles left out
-                progress.measured(working / parallel)
+                progress.measured(working / used["processes"])
                 progress.update(ran)
             if out is not None and time.perf_counter() - last > CHECKPOINT_SECONDS:
                 _save(out, sweep, lines, runs, False, ran, time.perf_counter() - started,
-                      compiling, where)
+                      compiling, _where(client, used))
                 last = time.perf_counter()
         failed = False
     finally:
         seconds = time.perf_counter() - started
         complete = not failed and len(lines) == sweep.plan.count
         if out is not None:
-            runs = _save(out, sweep, lines, runs, complete, ran, seconds, compiling, where)
+            runs = _save(out, sweep, lines, runs, complete, ran, seconds, compiling,
+                         _where(client, used))
     text = table.text(columns, lines)
-    return Outcome(text, parse(text), complete, ran, seconds, compiling, where, runs)
+    return Outcome(text, parse(text), complete, ran, seconds, compiling, _where(client, used),
+                   runs)
+
+
+def _where(client, used: dict) -> str:
+    if client is not None:
+        return f"the Dask cluster at {used['address']} ({used['processes']} threads)"
+    return f"{used['processes']} local processes" if used["processes"] > 1 else "this process"
 
 
 def _save(out, sweep: Sweep, lines: dict, runs: list, complete: bool, ran: int,
