@@ -74,7 +74,7 @@ def test_blocks_depend_on_the_count_alone_and_cover_it_once():
 
 @pytest.mark.parametrize("vary, words", [
     ("paylod.mass=1", "unknown scene key 'paylod.mass'; did you mean"),
-    ("friction.colomb=0.1", "friction.colomb is not a key of friction; did you mean 'friction.coulomb'"),
+    ("friction.colomb=0.1", "not a key of friction; did you mean 'friction.coulomb'"),
     ("payload.mass=-1", "payload.mass = -1 is impossible"),
     ("payload.mass=lin:1:2", "lin:A:B:N takes two numbers and a count"),
     ("payload.mass=log:0:1:5", "log:A:B:N needs A and B of one sign"),

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from ...physics.scene import Scene, SceneError, load_scene
 from .plan import Plan, overrides
 from .rows import check_metrics
-from .run import Outcome, Sweep, execute
+from .run import SweepResult, Sweep, execute
 from .spec import parse_vary
 
 
@@ -51,10 +51,10 @@ def check_values(base: Scene, v) -> None:
 def sweep(scene="release", vary=(), *, samples: int | None = None, seed: int = 0,
           metrics=None, after: float = 0.0, duration: float | None = None, out=None,
           resume: bool = False, workers: int | None = None, scheduler: str | None = None,
-          estimate: str | None = "off", plot=None) -> Outcome:
+          estimate: str | None = "off", plot=None) -> SweepResult:
     """Run a sweep: `scene` (a preset's name, a .yaml path or a Scene) with the keys of
     `vary` (a mapping {KEY: SPEC} or "KEY=SPEC" strings, as `arm-sim sweep --vary`) taken
-    by every sample. Returns the Outcome: `.columns` ({column: array or list}, so
+    by every sample. Returns a SweepResult: `.columns` ({column: array or list}, so
     `pandas.DataFrame(result.columns)`), `.text` (the table's bytes), `.counts`,
     `.complete`. With `out` (a .csv path) the table, its sidecar (.json) and its picture
     (.png) are written there, as the command writes them; `resume` goes on from a table

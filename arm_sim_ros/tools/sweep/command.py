@@ -97,9 +97,10 @@ def cmd_sweep(args) -> int:
         picture = None
     print(describe(sweep, result, out, picture))
     if not result.complete:
-        print(f"arm-sim: interrupted ({stop.requested or 'stopped'}): {len(result.columns['index'])} "
-              f"of {sweep.plan.count} samples are in {out}; the same command with --resume "
-              "runs the rest", file=sys.stderr)
+        kept = len(result.columns["index"])
+        print(f"arm-sim: interrupted ({stop.requested or 'stopped'}): {kept} of "
+              f"{sweep.plan.count} samples are in {out}; the same command with --resume runs "
+              "the rest", file=sys.stderr)
         return STOPPED
     return DONE
 

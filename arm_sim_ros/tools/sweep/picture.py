@@ -118,9 +118,9 @@ def distributions(plt, sweep, columns, names):
                 if not len(values):
                     continue
                 style = "--" if column.endswith("_2") else "-"
+                joint = column[-1:] if column != figure_name else ""
                 ax.step(values, np.arange(1, len(values) + 1) / len(values), where="post",
-                        color=colour, linestyle=style,
-                        label=f"{_point_label(sweep, p)}{column[-1:] if column != figure_name else ''}")
+                        color=colour, linestyle=style, label=_point_label(sweep, p) + joint)
         ax.set_xlabel(figure_name + _unit(figure_name))
         ax.set_ylabel("fraction of samples at or below")
         ax.set_ylim(0, 1.02)
@@ -144,12 +144,18 @@ def _unit(figure_name: str) -> str:
 
 
 def against(plt, columns, names, key):
-    figure, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
-    for name in names:
-        ax.plot(columns[key.key], columns[name], "o-", label=name)
-    _scale(ax, key, None)
-    ax.set_xlabel(key.key)
-    ax.legend(fontsize=8)
+    """Each figure shown against the one grid key: a panel per figure, both joints."""
+    figures = list(dict.fromkeys(n[:-2] if n[-2:] in ("_1", "_2") else n for n in names))
+    figure, axes = plt.subplots(1, len(figures), figsize=(4.6 * len(figures), 3.8),
+                                squeeze=False, constrained_layout=True)
+    for ax, figure_name in zip(axes[0], figures):
+        for column in [n for n in names if n == figure_name or n[:-2] == figure_name]:
+            style = "s--" if column.endswith("_2") else "o-"
+            ax.plot(columns[key.key], columns[column], style, label=column)
+        _scale(ax, key, None)
+        ax.set_xlabel(key.key)
+        ax.set_ylabel(figure_name + _unit(figure_name))
+        ax.legend(fontsize=8)
     return figure
 
 

@@ -16,7 +16,7 @@ import signal
 from .rows import Task, run_task
 
 CHECK_SECONDS = 0.2          # how often a wait looks at a stop request
-SPAWN_WORTH = 5.0            # seconds of work left (one process) that pay for starting more
+SPAWN_WORTH = 10.0           # seconds of work left (one process) that pay for starting more
 _halt = None                 # this worker process's halt event (set by the sweep's process)
 
 

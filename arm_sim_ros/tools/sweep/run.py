@@ -51,7 +51,7 @@ class Sweep:
 
 
 @dataclass
-class Outcome:
+class SweepResult:
     """A sweep's result: the table as text (the bytes of its file), its columns parsed
     (numbers as float arrays, NaN where empty; text as lists), and how it went."""
 
@@ -72,10 +72,11 @@ class Outcome:
 
 
 def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, client=None,
-            stop=None, progress=None) -> Outcome:
+            stop=None, progress=None) -> SweepResult:
     """Run the sweep; `out` (a path, or None: nothing written) gets the table (as soon as
     a block is done, then every CHECKPOINT_SECONDS and at the end) and its sidecar.
-    `client`: a Dask cluster's (pool.connect) to run on, else local `workers`. `stop.requested` (signals.StopOnSignals) ends it early."""
+    `client`: a Dask cluster's (pool.connect) to run on, else local `workers`.
+    `stop.requested` (signals.StopOnSignals) ends it early."""
     stop = stop if stop is not None else _NeverStop()
     columns = sweep.columns
     lines, runs = {}, []
@@ -121,7 +122,7 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
             runs = _save(out, sweep, lines, runs, complete, ran, seconds, compiling,
                          _where(client, used))
     text = table.text(columns, lines)
-    return Outcome(text, parse(text), complete, ran, seconds, compiling, _where(client, used),
+    return SweepResult(text, parse(text), complete, ran, seconds, compiling, _where(client, used),
                    runs)
 
 

@@ -30,7 +30,8 @@ def describe(sweep, result, out=None, picture=None) -> str:
             lines.append(f"{f'{name} ({unit})':{width}}  {cells}{len(finite):11d}")
     rate = result.ran / result.seconds if result.seconds > 0 else float("nan")
     lines.append(f"{result.ran} samples run in {result.seconds:.3g} s on {result.workers}: "
-                 f"{rate:.4g} samples/s (the workers spent {result.compiling:.3g} s compiling)")
+                 f"{rate:.4g} samples/s; compiling kernels took {result.compiling:.3g} s of "
+                 "the workers' time")
     if out is not None:
         lines.append(f"table {out} ({len(result.columns.get('index', []))} rows); timing "
                      f"{out.with_suffix('.json')}" + (f"; picture {picture}" if picture else ""))
