@@ -14,6 +14,7 @@ are wall-clock on whatever else the machine runs: compare the two side by side.
 from __future__ import annotations
 
 import argparse
+import logging
 import shlex
 import time
 
@@ -40,8 +41,8 @@ def warm(duration: float) -> int:
 
 def timed(workers: int, samples: int, duration: float):
     with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                  protocol="tcp", host="127.0.0.1",
-                                  dashboard_address=None) as cluster, \
+                                  protocol="tcp", host="127.0.0.1", dashboard_address=None,
+                                  silence_logs=logging.CRITICAL) as cluster, \
             distributed.Client(cluster) as client:
         client.run(warm, duration)
         started = time.perf_counter()

@@ -119,3 +119,12 @@ def test_a_sweep_turns_the_estimate_off_unless_asked():
     assert make_sweep(load_scene(), ["gravity=1"]).base.estimate == "off"
     assert make_sweep(load_scene(), ["gravity=1"], estimate=None).base.estimate == "global"
     assert make_sweep(load_scene(), ["tolerance=1e-4"]).base.estimate == "global"
+
+
+def test_a_plot_of_no_column_is_refused_before_any_work(capsys, tmp_path):
+    out = tmp_path / "x.csv"
+    code = cli.main(["sweep", "release", "--vary", "gravity=1", "--plot", "settle_tme_1",
+                     "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "no column 'settle_tme_1'; did you mean 'settle_time_1'" in err
+    assert not out.exists()

@@ -84,17 +84,18 @@ def cmd_sweep(args) -> int:
     if args.workers < 1:
         from ...usage import UsageError
         raise UsageError(f"--workers {args.workers} must be at least 1")
+    from .picture import check_plot
+    check_plot(args.plot, sweep.columns)                            # before the work
     from .pool import connect
     client = connect(args.scheduler) if args.scheduler else None    # before any file
     out = check_outputs(args)
     label = f"arm-sim sweep {base.name}"
     with StopOnSignals() as stop, Progress(sweep.plan.count, label, unit="samples") as progress:
         result = execute(sweep, out, args.resume, args.workers, client, stop, progress)
+    picture = None
     if result.complete:
         from .picture import draw
         picture = draw(out, sweep, result.columns, args.plot)
-    else:
-        picture = None
     print(describe(sweep, result, out, picture))
     if not result.complete:
         kept = len(result.columns["index"])

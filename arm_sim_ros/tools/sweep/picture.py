@@ -12,6 +12,7 @@ import numpy as np
 
 from ...physics.effects import scene_effects
 from ...physics.scene import SceneError
+from ...usage import did_you_mean
 from ...physics.stepping import stability
 from ...physics.stepping.integrators import INTEGRATORS
 from .plan import overrides
@@ -22,19 +23,24 @@ MAX_PANELS = 6
 NOT_OK = {"diverged": "#222222", "fault": "#8b0000", "refused": "#bbbbbb"}
 
 
-def shown(sweep, columns: dict, plot) -> list:
+def check_plot(plot, header) -> list:
+    """--plot's columns, each one of the table's (`header`), or one line saying which not."""
+    if plot is None:
+        return []
+    names = [n.strip() for n in plot.split(",") if n.strip()]
+    unknown = [n for n in names if n not in header] or ([] if names else [plot])
+    if unknown:
+        raise SceneError(f"--plot {plot}: no column {unknown[0]!r}; "
+                         f"{did_you_mean(unknown[0], header)}columns: {', '.join(header)}")
+    return names
+
+
+def shown(columns: dict, plot) -> list:
     """The columns the picture shows: --plot's, else the reference figures where any row
     has them, else max_abs_residual."""
-    if plot:
-        names = [n.strip() for n in plot.split(",") if n.strip()]
-        unknown = [n for n in names if n not in columns]
-        if unknown:
-            raise SceneError(f"--plot {plot}: no column {unknown[0]}; columns: "
-                             f"{', '.join(columns)}")
-        return names
     figures = [f"{name}_{joint}" for name in REFERENCE_FIGURES for joint in (1, 2)
                if np.isfinite(columns.get(f"{name}_{joint}", np.array([np.nan]))).any()]
-    return figures or ["max_abs_residual"]
+    return check_plot(plot, list(columns)) or figures or ["max_abs_residual"]
 
 
 def draw(out, sweep, columns: dict, plot=None):
@@ -43,7 +49,7 @@ def draw(out, sweep, columns: dict, plot=None):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = shown(sweep, columns, plot)
+    names = shown(columns, plot)
     numeric = [v for v in sweep.plan.grid if len(v.values) > 1 and len(v.columns) == 1
                and all(isinstance(x, (int, float)) for x in v.values)]
     if len(numeric) >= 2:

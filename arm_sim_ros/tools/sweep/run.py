@@ -85,6 +85,8 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
         lines = table.read_done(out, columns)
         runs = _previous_runs(out)
     tasks = sweep.tasks(lines)
+    if progress is not None:                   # what this call runs: a resume, the rest
+        progress.total = sum(task.stop - task.first for task in tasks)
     used = {"processes": 1}                # where the blocks run: pool.every_core says
     if client is not None:
         used["address"] = client.scheduler.address
