@@ -23,6 +23,7 @@ ORDER = {
              "recorder_link", "core", "transports", "main"],
     "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
               "sweep", "inspect", "batch", "urdf", "cli", "reference"],
+    "testing": ["trace", "loop", "wire", "controller", "evidence", "plugin", "launch"],
 }
 LAYERS = list(ORDER)
 FRONT_DOOR = "arm_sim_ros"       # the package's __init__: lazy re-exports only
