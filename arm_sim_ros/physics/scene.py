@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
+from functools import cached_property
 from math import inf, isfinite, radians
 from pathlib import Path
 
@@ -156,16 +157,16 @@ class Scene:
                                  "beyond double precision with these values; use values at a "
                                  "robot's scale")
 
-    @property
-    def method(self) -> str:   # the integrator named, else stability.unstiff_method's choice
+    @cached_property   # the integrator named, else stability.unstiff_method's choice (cached:
+    def method(self) -> str:    # a frozen scene's values never change; a sweep asks often)
         return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
-    @property
+    @cached_property
     def links(self) -> ArmParameters:
         """The bare links: no payload, no rotor inertia."""
         return ArmParameters(**{name: getattr(self, name) for name in PAIR_FIELDS})
 
-    @property
+    @cached_property
     def arm(self) -> ArmParameters:
         """The arm the physics moves: links, the payload folded into link 2, and the motors'
         reflected rotor inertia."""

@@ -120,3 +120,16 @@ def test_observe_hands_out_every_rows_trajectory_in_time_order_whatever_the_thre
     calls = observed(1)
     assert calls == observed(2)
     assert calls[0][1] == 0.0 and any(c[1] > 0.0 for c in calls)    # several chunks
+
+
+@pytest.mark.parametrize("case", ["release_masses", "servo_reach", "servo_hold", "sensors",
+                                  "sensed_servo", "estimated"])
+def test_samples_of_one_structure_run_together_in_compiled_calls(case, monkeypatch):
+    """One group of rows (one compiled call per chunk for them all), no step in Python."""
+    scenes, duration = CASES[case]
+    taken, groups = [], set()
+    python_step = Simulator.step_in_python
+    monkeypatch.setattr(Simulator, "step_in_python",
+                        lambda sim: (taken.append(sim.steps), python_step(sim)))
+    run_scenes(scenes, duration, observe=lambda indices, *rows: groups.add(tuple(indices)))
+    assert groups == {tuple(range(len(scenes)))} and taken == []
