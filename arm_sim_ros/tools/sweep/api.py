@@ -64,7 +64,7 @@ def sweep(scene="release", vary=(), *, samples: int | None = None, seed: int = 0
     setup = make_sweep(base, vary, samples, seed, metrics, after, duration, estimate)
     if out is not None and not str(out).endswith(".csv"):
         raise SceneError(f"out {out}: the table's name must end in .csv")
-    workers = os.cpu_count() or 1 if workers is None else workers
+    workers = (os.cpu_count() or 1) if workers is None else workers
     if workers < 1:
         raise SceneError(f"workers {workers} must be at least 1")
     from .pool import connect

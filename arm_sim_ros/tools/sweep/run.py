@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -15,7 +16,7 @@ import numpy as np
 
 from ...physics.scene import Scene
 from .plan import Plan
-from .rows import Task, header
+from .rows import OUTCOMES, Task, header
 from . import pool, table
 
 CHECKPOINT_SECONDS = 10.0     # wall seconds between rewrites of the table while it runs
@@ -67,8 +68,7 @@ class SweepResult:
     @property
     def counts(self) -> dict:
         statuses = self.columns.get("status", [])
-        return {s: sum(1 for x in statuses if x == s) for s in ("ok", "diverged", "refused",
-                                                                 "fault")}
+        return {s: sum(1 for x in statuses if x == s) for s in OUTCOMES}
 
 
 def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, client=None,
@@ -124,8 +124,8 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
             runs = _save(out, sweep, lines, runs, complete, ran, seconds, compiling,
                          _where(client, used))
     text = table.text(columns, lines)
-    return SweepResult(text, parse(text), complete, ran, seconds, compiling, _where(client, used),
-                   runs)
+    return SweepResult(text, parse(text), complete, ran, seconds, compiling,
+                       _where(client, used), runs)
 
 
 def _where(client, used: dict) -> str:
@@ -148,7 +148,6 @@ def _save(out, sweep: Sweep, lines: dict, runs: list, complete: bool, ran: int,
 
 
 def _previous_runs(out) -> list:
-    import json
     try:
         return list(json.loads(table.beside(out, table.SIDECAR).read_text())["runs"])
     except (OSError, ValueError, KeyError, TypeError):

@@ -28,8 +28,8 @@ PICTURE = ".png"
 def cell(value) -> str:
     """A value as the table writes it: repr of a double (NaN: empty), whole numbers and
     text as they are."""
-    if isinstance(value, float):
-        return "" if isnan(value) else repr(value)
+    if isinstance(value, float):          # numpy's doubles too: their repr names numpy
+        return "" if isnan(value) else repr(float(value))
     return str(value)
 
 
