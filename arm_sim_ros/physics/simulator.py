@@ -54,10 +54,8 @@ class Simulator:
         self._rhs = self.dynamics.function
         self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
-            self._tableau, self.dynamics.active, self.arm, self.step_size)
-        if scene.stability_plan == "off" and self.substeps > 1:   # a stability study's steps
-            self.substeps, message = 1, (f"{message.partition(': each')[0]}; stability_plan "
-                                         "off: each step is taken whole and may diverge")
+            self._tableau, self.dynamics.active, self.arm, self.step_size,
+            whole=scene.stability_plan == "off")
         if message:
             self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit

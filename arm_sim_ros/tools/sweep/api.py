@@ -1,7 +1,6 @@
 """`arm_sim_ros.sweep(...)`: the sweep `arm-sim sweep` runs, from Python."""
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 
 from ...physics.scene import Scene, SceneError, load_scene
@@ -58,14 +57,14 @@ def sweep(scene="release", vary=(), *, samples: int | None = None, seed: int = 0
     `pandas.DataFrame(result.columns)`), `.text` (the table's bytes), `.counts`,
     `.complete`. With `out` (a .csv path) the table, its sidecar (.json) and its picture
     (.png) are written there, as the command writes them; `resume` goes on from a table
-    an interrupted sweep left. `workers`: local processes (default: every core; 1: this
-    process); `scheduler`: a Dask cluster's address instead."""
+    an interrupted sweep left. `workers`: local processes (default: every core, where the
+    work is worth starting them; 1: this process); `scheduler`: a Dask cluster's address
+    instead."""
     base = scene if isinstance(scene, Scene) else load_scene(scene)
     setup = make_sweep(base, vary, samples, seed, metrics, after, duration, estimate)
     if out is not None and not str(out).endswith(".csv"):
         raise SceneError(f"out {out}: the table's name must end in .csv")
-    workers = (os.cpu_count() or 1) if workers is None else workers
-    if workers < 1:
+    if workers is not None and workers < 1:
         raise SceneError(f"workers {workers} must be at least 1")
     from .pool import connect
     client = connect(scheduler) if scheduler else None

@@ -10,11 +10,10 @@ out). Ctrl-C writes the samples done; --resume runs the rest.
 """
 from __future__ import annotations
 
-import os
 import sys
 
 from ...outputs import check_output, claim_output, clear_output
-from ...usage import DONE, STOPPED
+from ...usage import DONE, FAULT, STOPPED
 from ..arguments import add_scene_arguments, scene_from_args
 from ..progress import Progress
 from ..signals import StopOnSignals
@@ -55,8 +54,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--estimate", choices=("off", "global"),
                    help="off (the default in a sweep: the steps alone) or global (each "
                         "sample's error estimate, at its price)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="local processes (default: the CPU count; 1: this process)")
+    p.add_argument("--workers", type=int,
+                   help="local processes (default: the CPU count, where the work is worth "
+                        "starting them; 1: this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://127.0.0.1:8786 (pip install "
                         "'arm_sim_ros[fit]')")
@@ -81,7 +81,7 @@ def cmd_sweep(args) -> int:
     duration = None if args.duration is None else parse_value("duration", args.duration)
     sweep = make_sweep(base, args.vary, args.samples, args.seed, args.metrics, args.after,
                        duration, estimate)
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         from ...usage import UsageError
         raise UsageError(f"--workers {args.workers} must be at least 1")
     from .picture import check_plot
@@ -99,10 +99,10 @@ def cmd_sweep(args) -> int:
     print(describe(sweep, result, out, picture))
     if not result.complete:
         kept = len(result.columns["index"])
-        print(f"arm-sim: interrupted ({stop.requested or 'stopped'}): {kept} of "
-              f"{sweep.plan.count} samples are in {out}; the same command with --resume runs "
-              "the rest", file=sys.stderr)
-        return STOPPED
+        why = result.lost or f"interrupted ({stop.requested or 'stopped'})"
+        print(f"arm-sim: {why}: {kept} of {sweep.plan.count} samples are in {out}; the same "
+              "command with --resume runs the rest", file=sys.stderr)
+        return FAULT if result.lost else STOPPED
     return DONE
 
 

@@ -6,13 +6,18 @@ do not depend on where or when it ran (rows.py), so neither does the table.
 A stop (Ctrl-C, SIGTERM: tools/signals.py) ends the work: blocks not yet started are
 cancelled, and the local processes abandon the blocks under way at their next chunk of
 samples (a `halt` event they share), so the sweep keeps exactly the blocks finished. Local
-processes ignore SIGINT: a Ctrl-C at the terminal reaches the whole process group, and the
-sweep, not each worker, decides what is kept.
+processes ignore the stop signals from their first instruction on (started while the sweep
+ignores them: an ignored signal stays ignored through exec, and Python then installs no
+KeyboardInterrupt): a Ctrl-C at the terminal, or `timeout`, signals the whole process
+group, and the sweep, not each worker, decides what is kept.
 """
 from __future__ import annotations
 
 import signal
+import threading
+from contextlib import contextmanager
 
+from ..signals import SIGNALS
 from .rows import Task, run_task
 
 CHECK_SECONDS = 0.2          # how often a wait looks at a stop request
@@ -25,10 +30,28 @@ class Halted(BaseException):
     is, so that no `except Exception` in the engine takes it for a sample's fault)."""
 
 
+class WorkersLost(RuntimeError):
+    """A local worker process died (killed, out of memory): the blocks it held are lost."""
+
+
 def _start_worker(halt) -> None:
     global _halt
     _halt = halt
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def stops_ignored():
+    """The stop signals ignored meanwhile (in the main thread: elsewhere there are no
+    handlers to change), so that the processes started now inherit them ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {number: signal.signal(number, signal.SIG_IGN) for number in SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def _halted() -> None:
@@ -58,21 +81,30 @@ def here(tasks, stop):
         yield done
 
 
-def every_core(tasks, workers: int, stop, used: dict):
-    """The first block here; the rest on `workers` local processes where they would take
-    more than SPAWN_WORTH seconds here (each new process imports and loads its kernels
-    first: a small sweep is done sooner without). `used["processes"]`: how many run it."""
+def local(tasks, workers: int | None, stop, used: dict):
+    """The blocks on `workers` local processes (None: as many as the machine has CPUs,
+    where the work is worth it: the first block here, the rest on processes only where
+    they would take more than SPAWN_WORTH seconds here, as each new process imports and
+    loads its kernels first); 1: here. `used["processes"]`: how many run it."""
+    import os
+
+    if workers is not None:
+        if workers > 1 and len(tasks) > 1:
+            used["processes"] = min(workers, len(tasks))
+            yield from processes(tasks, used["processes"], stop)
+        else:
+            yield from here(tasks, stop)
+        return
     first = None
     for first in here(tasks[:1], stop):
         yield first
-    if first is None or len(tasks) == 1:
-        return
-    left = (first.seconds - first.compiling) * (len(tasks) - 1)
-    if left <= SPAWN_WORTH or len(tasks) == 2:
+    cores = min(os.cpu_count() or 1, len(tasks) - 1)
+    if first is None or cores < 2 or (first.seconds - first.compiling) * (
+            len(tasks) - 1) <= SPAWN_WORTH:
         yield from here(tasks[1:], stop)
         return
-    used["processes"] = min(workers, len(tasks) - 1)
-    yield from processes(tasks[1:], used["processes"], stop)
+    used["processes"] = cores
+    yield from processes(tasks[1:], cores, stop)
 
 
 def processes(tasks, workers: int, stop):
@@ -81,16 +113,23 @@ def processes(tasks, workers: int, stop):
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from multiprocessing import get_context
 
+    from concurrent.futures.process import BrokenProcessPool
+
     context = get_context("spawn")
     halt = context.Event()
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                              initargs=(halt,)) as pool:
-        waiting = {pool.submit(run_in_worker, task) for task in tasks}
+        with stops_ignored():              # the submits start the processes
+            waiting = {pool.submit(run_in_worker, task) for task in tasks}
         try:
             while waiting and not stop.requested:
                 finished, waiting = wait(waiting, CHECK_SECONDS, FIRST_COMPLETED)
                 for future in finished:
-                    yield future.result()
+                    try:
+                        yield future.result()
+                    except BrokenProcessPool:
+                        raise WorkersLost("a worker process died (killed, or out of "
+                                          "memory?)") from None
                 if not finished:
                     yield None
         finally:

@@ -64,6 +64,7 @@ class SweepResult:
     compiling: float          # of the workers' seconds, those spent compiling kernels
     workers: str
     runs: list = field(default_factory=list)
+    lost: str = ""            # why the work ended early other than by a stop, if it did
 
     @property
     def counts(self) -> dict:
@@ -71,11 +72,12 @@ class SweepResult:
         return {s: sum(1 for x in statuses if x == s) for s in OUTCOMES}
 
 
-def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, client=None,
+def execute(sweep: Sweep, out=None, resume: bool = False, workers: int | None = 1, client=None,
             stop=None, progress=None) -> SweepResult:
     """Run the sweep; `out` (a path, or None: nothing written) gets the table (as soon as
     a block is done, then every CHECKPOINT_SECONDS and at the end) and its sidecar.
-    `client`: a Dask cluster's (pool.connect) to run on, else local `workers`.
+    `client`: a Dask cluster's (pool.connect) to run on, else local `workers` (None:
+    every core, where the work is worth starting processes: pool.local).
     `stop.requested` (signals.StopOnSignals) ends it early."""
     stop = stop if stop is not None else _NeverStop()
     columns = sweep.columns
@@ -87,17 +89,16 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
     tasks = sweep.tasks(lines)
     if progress is not None:                   # what this call runs: a resume, the rest
         progress.total = sum(task.stop - task.first for task in tasks)
-    used = {"processes": 1}                # where the blocks run: pool.every_core says
+    used = {"processes": 1}                # where the blocks run: pool.local says
     if client is not None:
         used["address"] = client.scheduler.address
         used["processes"] = max(1, sum(w.get("nthreads", 1) for w in
                                        client.scheduler_info().get("workers", {}).values()))
         blocks = pool.cluster(tasks, client, stop)
     else:
-        blocks = (pool.every_core(tasks, workers, stop, used) if workers > 1
-                  else pool.here(tasks, stop))
+        blocks = pool.local(tasks, workers, stop, used)
     started, last = time.perf_counter(), float("-inf")
-    ran, compiling, working, failed = 0, 0.0, 0.0, True
+    ran, compiling, working, failed, lost = 0, 0.0, 0.0, True, ""
     try:
         for done in blocks:
             if done is None:                   # none finished yet
@@ -117,6 +118,8 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
                       compiling, _where(client, used))
                 last = time.perf_counter()
         failed = False
+    except pool.WorkersLost as error:     # the blocks done are kept; a resume runs the rest
+        lost = str(error)
     finally:
         seconds = time.perf_counter() - started
         complete = not failed and len(lines) == sweep.plan.count
@@ -125,7 +128,7 @@ def execute(sweep: Sweep, out=None, resume: bool = False, workers: int = 1, clie
                          _where(client, used))
     text = table.text(columns, lines)
     return SweepResult(text, parse(text), complete, ran, seconds, compiling,
-                       _where(client, used), runs)
+                       _where(client, used), runs, lost)
 
 
 def _where(client, used: dict) -> str:
