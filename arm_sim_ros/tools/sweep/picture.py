@@ -231,13 +231,21 @@ def _edges(values) -> np.ndarray:
         mid = np.sqrt(v[1:] * v[:-1])
         return np.concatenate([[v[0] ** 2 / mid[0]], mid, [v[-1] ** 2 / mid[-1]]])
     mid = (v[1:] + v[:-1]) / 2
-    return np.concatenate([[2 * v[0] - mid[0]], mid, [2 * v[-1] - mid[-1]]])
+    low = 2 * v[0] - mid[0]
+    if v.min() > 0 and low <= 0:            # positive values: no cell reaches below 0
+        low = v[0] / 2
+    return np.concatenate([[low], mid, [2 * v[-1] - mid[-1]]])
 
 
 def _is_log(v) -> bool:
-    """Values drawn on a log axis: all positive, spanning 20x or more."""
-    v = np.asarray(v, dtype=float)
-    return len(v) > 2 and bool(np.all(v > 0)) and v.max() >= 20 * v.min()
+    """Values drawn on a log axis: all positive, and spanning 20x or more, or evenly
+    spaced in log (a log: grid), or two of them 4x apart."""
+    v = np.sort(np.asarray(v, dtype=float))
+    if len(v) < 2 or not np.all(v > 0):
+        return False
+    ratios = v[1:] / v[:-1]
+    return bool(v[-1] >= 20 * v[0] or (len(v) == 2 and ratios[0] >= 4)
+                or (len(v) > 2 and np.ptp(np.log(ratios)) < 1e-9 and ratios[0] > 1.5))
 
 
 def _scale(ax, x_key, y_key) -> None:

@@ -84,8 +84,9 @@ def here(tasks, stop):
 def local(tasks, workers: int | None, stop, used: dict):
     """The blocks on `workers` local processes (None: as many as the machine has CPUs,
     where the work is worth it: the first block here, the rest on processes only where
-    they would take more than SPAWN_WORTH seconds here, as each new process imports and
-    loads its kernels first); 1: here. `used["processes"]`: how many run it."""
+    they would take longer here than a new process takes to start, SPAWN_WORTH seconds,
+    and to compile what the first block compiled); 1: here. `used["processes"]`: how
+    many run it."""
     import os
 
     if workers is not None:
@@ -100,7 +101,7 @@ def local(tasks, workers: int | None, stop, used: dict):
         yield first
     cores = min(os.cpu_count() or 1, len(tasks) - 1)
     if first is None or cores < 2 or (first.seconds - first.compiling) * (
-            len(tasks) - 1) <= SPAWN_WORTH:
+            len(tasks) - 1) <= SPAWN_WORTH + first.compiling:
         yield from here(tasks[1:], stop)
         return
     used["processes"] = cores
