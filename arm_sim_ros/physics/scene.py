@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
+from functools import cached_property
 from math import inf, isfinite
 from pathlib import Path
 
@@ -69,6 +70,9 @@ class Scene:
     # what a run computes of its own error (trust/unestimated.py): global (the shadow and
     # its checks) or off (the steps alone: no error estimate, so tolerance 0)
     estimate: str = "global"
+    # on: a step beyond the method's stability limit is split into sub-steps (stability.py);
+    # off: every step taken whole, as a stability study needs to find where it diverges
+    stability_plan: str = "on"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -107,6 +111,10 @@ class Scene:
             raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
                              f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
                              "out (estimate off alone sets it to 0)")
+        if self.stability_plan not in ("on", "off"):
+            raise SceneError(f"stability_plan {self.stability_plan!r} is unknown; choose on "
+                             "(sub-steps where a step would be unstable, the default) or off "
+                             "(every step whole: a stability study)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
@@ -146,16 +154,16 @@ class Scene:
                                  "beyond double precision with these values; use values at a "
                                  "robot's scale")
 
-    @property
-    def method(self) -> str:   # the integrator named, else stability.unstiff_method's choice
+    @cached_property   # the integrator named, else stability.unstiff_method's choice (cached:
+    def method(self) -> str:    # a frozen scene's values never change; a sweep asks often)
         return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
-    @property
+    @cached_property
     def links(self) -> ArmParameters:
         """The bare links: no payload, no rotor inertia."""
         return ArmParameters(**{name: getattr(self, name) for name in PAIR_FIELDS})
 
-    @property
+    @cached_property
     def arm(self) -> ArmParameters:
         """The arm the physics moves: links, the payload folded into link 2, and the motors'
         reflected rotor inertia."""

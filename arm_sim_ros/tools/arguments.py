@@ -57,13 +57,15 @@ def read_urdf_file(path: str) -> str:
         raise SceneError(f"--urdf {path}: cannot read it ({reason})") from None
 
 
-def add_scene_arguments(parser, stepping: bool = True) -> None:
-    """--scene, --urdf and --set; with `stepping` (a command that integrates) --step,
-    --tolerance and --max-substeps too."""
-    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`) or a scene .yaml file")
+def add_scene_arguments(parser, stepping: bool = True, scene_option: bool = True) -> None:
+    """--scene (unless the command takes the scene as its first argument), --urdf and --set;
+    with `stepping` (a command that integrates) --step, --tolerance and --max-substeps too."""
+    if scene_option:
+        parser.add_argument("--scene", default="release",
+                            help="preset name (see `arm-sim scenes`) or a scene .yaml file")
     parser.add_argument("--urdf", metavar="FILE",
                         help="take the arm from a planar 2R URDF: links, inertias, joint and "
-                             "effort limits, damping, friction; --scene gives the rest")
+                             "effort limits, damping, friction; the scene gives the rest")
     if stepping:
         add_stepping_arguments(parser)
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",

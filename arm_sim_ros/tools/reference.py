@@ -35,6 +35,9 @@ OFFLINE_ONLY = {
                 "or rad/s for a velocity servo)",
     "duration": "simulated seconds `arm-sim run` runs (a whole number of steps); the node "
                 "runs until stopped (`--duration`)",
+    "stability_plan": "on: a step beyond the integrator's stability limit is taken as "
+                      "sub-steps (the node always plans); off: every step whole, so a run may "
+                      "diverge there (a stability study: `arm-sim sweep`)",
 }
 KINDS = {"pair": "[a, b]", "float": "number", "str": "text", "float_or_pair": "number or [a, b]",
          "pair_or_none": "[a, b]", "effect": "mapping", "names": "[name, name]",
