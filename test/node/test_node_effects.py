@@ -273,7 +273,7 @@ def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_i
     assert set(LIVE) == {"damping", "command_delay"} | {n for n in names
                                                         if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
-                               "joint_commands_topic"} | (names - set(LIVE))
+                               "joint_commands_topic", "paused"} | (names - set(LIVE))
 
 
 def test_arm_sim_node_help_lists_every_effect_parameter_and_whether_it_changes_live(capsys):
