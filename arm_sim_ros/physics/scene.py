@@ -17,6 +17,7 @@ from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEP
 from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
+from .effects.base import whole_number
 from . import sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .stepping.stability import UNNAMED, unstiff_method
@@ -26,6 +27,10 @@ from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 # Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
 ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
               "joint_limits.upper")
+# YAML 1.1 (PyYAML, and rcl for `-p`) reads an unquoted off (no, false ...) as a bool: a
+# text key one of whose words is `off` takes that bool back as the word, so that
+# `estimate: off` in a scene file means what `-p estimate:=off` means on the node.
+FALSE_AS_TEXT = {"estimate": "off"}
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 # Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
@@ -68,7 +73,7 @@ class Scene:
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
-    max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
+    max_substeps: int = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
     # what a run computes of its own error (trust/unestimated.py): global (the shadow and
     # its checks) or off (the steps alone: no error estimate, so tolerance 0)
     estimate: str = "global"
@@ -110,8 +115,8 @@ class Scene:
             raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
                              f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
                              "out (estimate off alone sets it to 0)")
-        if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
-            raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
+        if not 1 <= self.max_substeps <= MAX_SUBSTEPS:
+            raise SceneError(f"max_substeps = {self.max_substeps} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
         if not MIN_STEP_SIZE <= self.step_size <= MAX_DURATION:
             raise SceneError(f"step_size = {self.step_size} must be positive: from "
@@ -181,18 +186,26 @@ class Scene:
                 merged[key] = value
             else:
                 raise SceneError(unknown_key(key))
+        if "estimate" in merged:       # YAML's `off` (a bool) is the word here already
+            merged["estimate"] = coerce_value("estimate", "str", merged["estimate"])
         if merged.get("estimate") == "off" and "tolerance" not in merged:
             merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
 
-    def with_text_overrides(self, assignments) -> "Scene":
-        """Apply `key=value` strings as the command line gives them (pairs as `1,0`)."""
-        overrides = {}
+    def with_text_overrides(self, assignments, given=None) -> "Scene":
+        """Apply `key=value` strings as the command line gives them (pairs as `1,0`), in one
+        change with the values `given` beside them (--tolerance, --estimate ...): one rule
+        for what goes together (estimate off alone sets tolerance 0, not beside one)."""
+        overrides = dict(given or {})
         for text in assignments:
             key, sep, value = text.partition("=")
             key = key.strip()
             if not sep or not key:
                 raise SceneError(f"--set {text!r} is not of the form key=value")
+            if key in overrides:        # the last would win unseen
+                beside = (f"beside --{key.replace('_', '-')}" if key in (given or {})
+                          else "twice")
+                raise SceneError(f"--set {key} is given {beside}; give it once")
             overrides[key] = parse_value(key, value)
         return self.replace(**overrides)
 
@@ -209,8 +222,8 @@ class Scene:
         return steps
 
 
-FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
-                        "float" if f.type == "float" else "str") for f in fields(Scene)}
+FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else f.type if f.type in ("float", "int")
+                        else "str") for f in fields(Scene)}
 FIELD_KINDS |= {"damping": "float_or_pair", "effort_limits": "pair_or_none"}
 FIELD_KINDS |= {name: "effect" for name in MAPPINGS}
 
@@ -237,7 +250,7 @@ def _as_text(value) -> str:
 
 
 def coerce_value(name: str, kind: str, value):
-    """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
+    """`value` as the kind ("float", "int", "str", "pair", or a scene's "float_or_pair",
     "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
     its own numbers, text and pairs."""
     if kind == "float_or_pair":
@@ -257,9 +270,17 @@ def coerce_value(name: str, kind: str, value):
         except ParameterError as error:
             raise SceneError(str(error)) from None
         return values
+    if kind == "int":
+        try:
+            return whole_number(name, value, "1")
+        except ParameterError as error:
+            raise SceneError(str(error)) from None
     if kind == "str":
+        if value is False and name in FALSE_AS_TEXT:
+            value = FALSE_AS_TEXT[name]
         if not isinstance(value, str):
-            raise SceneError(f"{name} must be text, got {brief(value)}")
+            bare = " (a bare yes, on or true is read as a bool)" if value is True else ""
+            raise SceneError(f"{name} must be text, got {brief(value)}{bare}")
         return value
     if kind == "pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
@@ -317,12 +338,26 @@ def parse_value(key: str, text: str):
             return tuple(_number(key, v) for v in text.split(","))
         if kind == "float":
             return _number(key, text)
+        if kind == "int":
+            return _whole(text)
     except SceneError:
         raise
     except ValueError:
-        raise SceneError(f"{key}={text!r} is malformed: expected "
-                         f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
+        expected = {"pair": "two numbers like 1,0", "int": "a whole number"}.get(kind, "a number")
+        raise SceneError(f"{key}={text!r} is malformed: expected {expected}") from None
     return text
+
+
+def _whole(text: str):
+    """An integer as written (`9223372036854775807`), never through a double, which holds
+    whole numbers exactly only up to 2^53; `7.0` or `1e3` are read as doubles."""
+    text = text.strip()
+    if len(text.lstrip("+-")) > 400:           # int() refuses 4300 digits with a traceback
+        raise SceneError(f"an integer of {len(text)} digits is beyond any key's range")
+    try:
+        return int(text)
+    except ValueError:
+        return float(text)
 
 
 def _number(key: str, text: str) -> float:

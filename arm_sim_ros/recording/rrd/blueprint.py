@@ -233,13 +233,17 @@ def trust_view(snap) -> rrb.Vertical:
             name=title, contents=list(named), plot_legend=legend,
             overrides={path: rr.SeriesLines.from_fields(names=[drawable(name)])
                        for path, name in named.items()})
-    none = "" if snap.estimates else " (no error estimate for these steps)"
+    none = "" if snap.estimated else " (no error estimate for these steps)"
     counted = SUBSTEPS in accuracy_paths(snap)    # dopri5 adapts its own step: none to count
     panes = [pane(f"Energy balance residual [J]: flat at 0 when the books close "
                   f"(E(0) = {snap.initial_energy:.6g} J){'' if counted else none}",
                   {RESIDUAL[0]: "residual E−E₀−inputs+losses [J]"})]
-    if snap.estimates:
-        panes += [pane(f"Local error per step [rad, rad/s]; {snap.held_by}",
+    # what holds the error; switched live, the modes in order (rows carry estimates where
+    # the mode was global)
+    held = snap.held_by if len(snap.modes) == 1 else (
+        f"estimate {', then '.join(snap.modes)}: the events say when")
+    if snap.estimated:
+        panes += [pane(f"Local error per step [rad, rad/s]; {held}",
                        {LOCAL_ERROR: "local error estimate [rad, rad/s]"}),
                   pane("Accumulated error [rad, rad/s]: estimate of the global error",
                        {ACCUMULATED_ERROR: "accumulated error estimate [rad, rad/s]"})]
