@@ -144,6 +144,8 @@ class Snapshot:
             mode = self.modes[-1]
             self.modes = before.modes + ((mode,) if before.modes[-1] != mode else ())
             self.estimated = before.estimated or self.estimates
+        if len(self.modes) > 1:           # what held the error: each mode in its turn
+            self.held_by = f"estimate {', then '.join(self.modes)}: the events say when"
         return self
 
     def joint_torque(self, states, commands):

@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "arm_sim_ros"
 ORDER = {
     "base": ["usage", "interface", "yaml_files", "outputs"],
     "physics": ["model", "reports", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
-                "scene", "urdf", "compiled", "simulator", "batch"],
+                "scene_values", "scene", "urdf", "compiled", "simulator", "batch"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
              "recorder_link", "core", "transports", "main"],

@@ -238,12 +238,8 @@ def trust_view(snap) -> rrb.Vertical:
     panes = [pane(f"Energy balance residual [J]: flat at 0 when the books close "
                   f"(E(0) = {snap.initial_energy:.6g} J){'' if counted else none}",
                   {RESIDUAL[0]: "residual E−E₀−inputs+losses [J]"})]
-    # what holds the error; switched live, the modes in order (rows carry estimates where
-    # the mode was global)
-    held = snap.held_by if len(snap.modes) == 1 else (
-        f"estimate {', then '.join(snap.modes)}: the events say when")
     if snap.estimated:
-        panes += [pane(f"Local error per step [rad, rad/s]; {held}",
+        panes += [pane(f"Local error per step [rad, rad/s]; {snap.held_by}",
                        {LOCAL_ERROR: "local error estimate [rad, rad/s]"}),
                   pane("Accumulated error [rad, rad/s]: estimate of the global error",
                        {ACCUMULATED_ERROR: "accumulated error estimate [rad, rad/s]"})]
