@@ -151,6 +151,8 @@ class ArmSimCore(CommandInput):
                 servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
+        else:       # held: the state stands still, time does not (stamps, /clock, --duration)
+            self.sim.steps += self.config.steps_per_tick
         return self.joint_state()
 
     def _note_lateness(self, wall_now: float) -> None:
@@ -166,9 +168,10 @@ class ArmSimCore(CommandInput):
         total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
         if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
             # The simulator refused a step that would leave the finite numbers; hold the
-            # whole tick so joint_states never carries a non-finite number.
+            # whole tick's state so joint_states never carries a non-finite number, while
+            # its time goes on as the simulator's does (refused steps count).
             self.recorder.hand_over()
-            sim.state, sim.steps = before
+            sim.state, sim.steps = before[0], before[1] + self.config.steps_per_tick
             self.held = True
             self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
                            f"{sim.time:.6f} s); holding until reset")
@@ -190,10 +193,28 @@ class ArmSimCore(CommandInput):
         tau = self.sim.joint_torque(y)
         truth = JointStateData(self.stamp_ns(), values["frame_id"], values["joint_names"],
                                [y[0], y[1]], [y[2], y[3]], [float(tau[0]), float(tau[1])])
-        if self.sim.scene.sensors is None:
-            return truth
-        r = self.sim.readings
-        return truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
+        data = truth
+        if self.sim.scene.sensors is not None:
+            r = self.sim.readings
+            data = truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
+        return self._finite(data)
+
+    def _finite(self, data: JointStateData) -> JointStateData:
+        """`data`, or where a reading or torque has left the doubles at a finite state, the
+        last finite message at this stamp, the node holding from now on (the start is finite:
+        guard.check_start)."""
+        if all(isfinite(v) for part in (data, data.truth) if part is not None
+               for v in part.position + part.velocity + part.effort):
+            self._last_finite = data
+            return data
+        if not self.held:
+            self.held = True
+            self.log.error(f"a reading or torque is beyond double precision (at t = "
+                           f"{self.sim.time:.6f} s); holding the last finite one until reset")
+            self.recorder.event("readings not finite: holding", "error")
+        last = self._last_finite
+        truth = last.truth and last.truth._replace(stamp_ns=data.stamp_ns)
+        return last._replace(stamp_ns=data.stamp_ns, truth=truth)
 
     def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")

@@ -132,7 +132,10 @@ class Scene:
             raise SceneError(str(error)) from None
         for effect in effects:
             try:
-                derived = (effect.stiffness(arm), effect.frequency(arm))
+                derived = [effect.stiffness(arm), effect.frequency(arm)]
+                for name in ("engaged_stiffness", "engaged_frequency"):   # a compliant
+                    if hasattr(effect, name):                             # limit's, engaged
+                        derived.append(getattr(effect, name)(arm))
             except (OverflowError, ZeroDivisionError, ValueError):
                 derived = (inf,)
             if not all(isfinite(v) for v in derived):

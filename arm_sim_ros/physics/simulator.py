@@ -25,7 +25,7 @@ from .dynamics import book_entries, build_dynamics
 from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
-from .scene import Scene
+from .scene import Scene, SceneError
 from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle
 from .reports import Event, Sample
@@ -43,6 +43,10 @@ class Simulator:
         self.steps = 0
         self._build(scene)
         self.reset()
+        try:
+            guard.check_start(self)      # what it starts from is finite, or it is refused
+        except model.ParameterError as error:
+            raise SceneError(str(error)) from None
 
     def _build(self, scene: Scene, command=None) -> None:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""

@@ -248,6 +248,21 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     return values
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)    # the viewer draws in float32
+
+
+def reach(arm) -> float:
+    """Half the width of the arm's view: a little more than the arm at full stretch, at most
+    what the viewer's float32 holds."""
+    return min(1.1 * sum(arm.link_lengths), FLOAT32_MAX)
+
+
+def drawn(arm) -> bool:
+    """Whether the viewer's float32 holds the arm's drawing (an arm of 1e154 m it does not:
+    its drawing is left out, its numbers recorded all the same)."""
+    return 1.1 * sum(arm.link_lengths) < FLOAT32_MAX
+
+
 def drawing_points(arm, q1, q2):
     """Elbow and tip of many configurations, in the physics' coordinates (y up); the view
     flips them for the viewer's 2D y axis, which points down (blueprint.FLIP)."""

@@ -79,12 +79,16 @@ def test_a_command_flood_on_the_core_is_counted_and_logged_at_a_limited_rate(cap
 
 
 def test_a_state_that_cannot_stay_finite_is_held_and_reported_over_dds():
-    node, peer = start(61, initial_velocities=[1e300, -1e300])
+    """Its first step leaves the doubles: the node holds the last finite state, says so,
+    and its time runs on (stamps and /clock never stand still while it runs)."""
+    node, peer = start(61, initial_velocities=[5e153, -5e153])
     for _ in range(3):
         node.tick()
     received = peer.read(peer.joint_states, 3, msg.JointState)
     assert all(all_finite(m) for m in received)
-    assert [list(m.velocity) for m in received] == [[1e300, -1e300]] * 3
+    assert [list(m.velocity) for m in received] == [[5e153, -5e153]] * 3
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in received]
+    assert [b - a for a, b in zip(stamps, stamps[1:])] == [10_000_000] * 2
     assert node.core.held and "holding the last finite state" in node.core.sim.fault
     assert node.publish_diagnostics().level == interface.ERROR
 

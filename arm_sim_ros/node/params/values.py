@@ -4,7 +4,7 @@ the value the node keeps. The declarations themselves are in parameters.py."""
 from __future__ import annotations
 
 from ...physics.model import BRIEF, ParameterError, brief
-from ...physics.scene import SceneError, coerce_value
+from ...physics.scene_values import SceneError, coerce_value
 from ...usage import one_line
 
 

@@ -16,7 +16,7 @@ from ...physics.effects import EffortLimits
 from ...physics.scene import MAPPINGS, load_scene, preset_names
 from ...physics.urdf.read import changed_values
 from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, MEASURED, SUBSTEPS,
-                        accuracy_paths, channel_path, extra_paths, stored_path)
+                        accuracy_paths, channel_path, extra_paths, reach, stored_path)
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 ROS_TIME = "ros_time"            # the JointState stamp of each row: stamp origin + sim_time
@@ -177,11 +177,6 @@ def books_paths(snap) -> list[str]:
     return ([stored_path(part) for part in snap.parts]
             + [channel_path(n, k) for kind in KINDS[:2] for n, k in kinds if k == kind]
             + [RESIDUAL[0]])
-
-
-def reach(arm) -> float:
-    """Half the width of the arm's view: a little more than the arm at full stretch."""
-    return 1.1 * sum(arm.link_lengths)
 
 
 def torque_view(snap, path: str) -> rrb.TimeSeriesView:

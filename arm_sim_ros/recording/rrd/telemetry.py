@@ -42,7 +42,7 @@ import rerun as rr
 from .arm3d import arm3d_for
 from .blueprint import blueprint
 from ...physics.simulator import recorded_row
-from ..readouts import Snapshot, error_books, held_by, reads_alike
+from ..readouts import Snapshot, drawn, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks
 from .static_data import StaticData
 from .writer import BatchWriter
@@ -227,7 +227,7 @@ class RerunRecorder:
         too) is logged at the next send (StaticData)."""
         snap = self._snapshot = Snapshot(sim, initial).carry_on(self._described)
         self._described = snap
-        snap.arm3d = arm3d_for(sim.scene.links)   # the URDF has no payload
+        snap.arm3d = arm3d_for(sim.scene.links) if drawn(sim.scene.links) else None   # no payload
         if self._layout is None:
             self._layout = self._static.drawn(snap)   # the default blueprint: drawn here
             if open_sinks(self.stream, blueprint(snap, self.live, self.node), self.sinks,
