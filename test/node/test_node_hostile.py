@@ -93,6 +93,23 @@ def test_a_state_that_cannot_stay_finite_is_held_and_reported_over_dds():
     assert node.publish_diagnostics().level == interface.ERROR
 
 
+def test_a_torque_or_reading_that_leaves_the_doubles_at_a_finite_state_holds_the_last_message():
+    """Past what a scene's start is checked for (guard.check_start), a drive could still ask
+    a torque beyond the doubles at a finite state: the node publishes the last finite
+    message at each new stamp, says so once, and reports itself held."""
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 0.5}),
+                                logging.getLogger("beyond"), FakeClock())
+    last = core.tick()
+    core.sim.joint_torque = lambda state=None: (math.inf, math.nan)   # from now on
+    held = [core.tick() for _ in range(3)]
+    assert all(all_finite(data) for data in held) and core.held
+    assert [d.position for d in held] == [last.position] * 3 and [d.effort for d in held] == \
+        [last.effort] * 3
+    stamps = [last.stamp_ns] + [d.stamp_ns for d in held]
+    assert [b - a for a, b in zip(stamps, stamps[1:])] == [10_000_000] * 3
+    assert core.diagnostics().level == interface.ERROR
+
+
 # --- parameter fuzzing -------------------------------------------------------------------------
 
 FUZZED = [s.name for s in node_params.PARAMETERS if not s.name.startswith("rerun_")]
