@@ -56,5 +56,7 @@ setup(
             "arm_sim_node = arm_sim_ros.node.main:main",
             "arm_sim_controllers = arm_sim_ros.tools.control.follower:main",
         ],
+        # the fixtures `arm` and `arm_node` in every pytest run (arm_sim_ros/testing)
+        "pytest11": ["arm_sim_ros = arm_sim_ros.testing.plugin"],
     },
 )

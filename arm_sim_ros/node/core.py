@@ -24,6 +24,7 @@ from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_va
 from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
+from .schedule import Lockstep
 from .status import Interval, health, status_line
 
 
@@ -37,7 +38,7 @@ class ArmSimCore(CommandInput):
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
-        self.lockstep_states = []         # JointStates of lockstep ticks not yet published
+        self.lockstep = Lockstep()        # which command answers which state
         self.paused = False               # no physics; the held state is published (simulation.py)
         self._elapsed_before_reset_ns = 0
         self._configure(config)
@@ -52,6 +53,7 @@ class ArmSimCore(CommandInput):
     refused_commands = property(lambda self: self.commands.refused)
     command_timeouts = property(lambda self: self.commands.timeouts)
     command = property(lambda self: self.commands.value)
+    stale_commands = property(lambda self: self.lockstep.stale)
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
@@ -66,6 +68,8 @@ class ArmSimCore(CommandInput):
         self._last_tick_wall = None
         self.interval = Interval(self.wall_clock(), self.sim.time, self.refused_commands,
                                  self.late_ticks)
+        if config.values["lockstep"]:     # the state the first command answers
+            self.lockstep.queue(self.joint_state())
 
     def _on_sim_event(self, event) -> None:
         """Said at the event's level as it happens (a fault: _advance), warnings rate-limited."""
@@ -93,6 +97,8 @@ class ArmSimCore(CommandInput):
             self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder = self.recorder.reopen(config)
+        if "lockstep" in changed and config.values["lockstep"] and not restart:
+            self.lockstep.queue(self.joint_state())      # switched on: answer this state
         return changed
 
     def _event(self, text: str) -> None:
@@ -120,28 +126,23 @@ class ArmSimCore(CommandInput):
     def tick(self, wall_now: float | None = None,
              clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
-        lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless a node listens on /clock
+        lockstep the answers tick (callbacks.py): None, unless a node listens on /clock
         (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
-        it commands) and no tick came for lockstep_wait. Paused: the held state, time
-        standing still."""
-        if self.paused:
-            return self.joint_state()
-        if not self.config.values["lockstep"]:
-            return self._tick(wall_now)
+        it commands) and no tick came for lockstep_wait. Paused: the held state."""
+        if self.paused or not self.config.values["lockstep"]:   # lockstep: each state once
+            return (None if self.config.values["lockstep"] else self.joint_state()) \
+                if self.paused else self._tick(wall_now)
         wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
-        return self._tick(now) if wait and (last is None or now - last >= wait) else None
+        return self.lockstep.latest(self._tick(now)) if wait and (
+            last is None or now - last >= wait) else None
 
     def step_tick(self) -> JointStateData:
-        """A tick now, whatever the schedule (StepSimulation); its JointState."""
+        """A tick now (StepSimulation; in lockstep once answered: SimulationControl.ready)."""
         self._last_tick_wall = None       # asked for: not late
-        return self._tick()
-
-    def take_lockstep_states(self) -> list:
-        states, self.lockstep_states = self.lockstep_states, []
-        return states
+        data = self._tick()
+        return self.lockstep.latest(data) if self.config.values["lockstep"] else data
 
     def _tick(self, wall_now: float | None = None) -> JointStateData:
         self._note_lateness(self.wall_clock() if wall_now is None else wall_now)

@@ -30,7 +30,8 @@ class DiagnosticData:
     values: list           # [(key, value text)]
 
 
-COUNTERS = ("received_commands", "refused_commands", "late_ticks", "command_timeouts")
+COUNTERS = ("received_commands", "refused_commands", "stale_commands", "late_ticks",
+            "command_timeouts")
 
 
 def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held: bool,

@@ -135,6 +135,14 @@ class RecorderLink:
         if ticks and states:
             self.call("node_ticks", self.sim, ticks)
 
+    def idle(self) -> None:
+        """Nothing is stepping (lockstep waiting for its answer): what is kept goes to the
+        recorder, and out to its file when a send is due, as the steps would send it (a
+        test reads the recording of a run that stopped while the node goes on)."""
+        self.hand_over()
+        if self.recorder is not None and hasattr(self.recorder, "flush"):
+            self.call("flush", self.sim)
+
     def finish(self) -> None:
         self.call("finish", self.sim)
         self.recorder = None

@@ -68,10 +68,11 @@ def test_step_simulation_lockstep_and_pauses_leave_the_stream_as_it_was():
     expected = offline(make_core(), 40)
     stepped, locked, paused = make_core(), make_core(lockstep=True), make_core()
     got = {"stepped": [], "locked": [], "paused": []}
+    assert len(locked.lockstep.take()) == 1                   # the state awaiting its answer
     for k in range(40):
         got["stepped"].append(stepped.step_tick())             # StepSimulation, one by one
         locked.on_command([0.0, 0.0])                          # each command ticks once
-        got["locked"] += locked.take_lockstep_states()
+        got["locked"] += locked.lockstep.take()
         paused.paused = k % 3 == 0                             # paused ticks: time stands still
         held = paused.tick(0.0)
         paused.paused = False

@@ -168,8 +168,13 @@ PARAMETERS = (
     ParameterSpec("clock_origin", "str", "zero", "what /clock and the stamps count from: zero "
                   "(simulated time from 0 at start, as Gazebo does) or wall (the wall clock at "
                   "start + simulated time)", when=START),
-    ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
-                  "received, for deterministic controller tests"),
+    ParameterSpec("lockstep", "bool", False, "advance exactly one tick per command that "
+                  "answers the latest state (a JointState command carrying its stamp; an "
+                  "unstamped command answers the latest on arrival), for deterministic "
+                  "controller tests"),
+    ParameterSpec("paused", "bool", False, "start paused: no physics until the Simulation "
+                  "Interfaces' set_simulation_state plays or step_simulation steps (a test "
+                  "starts the loop when its controller is up)", when=START),
     ParameterSpec("lockstep_wait", "float", 0.1, "in lockstep, while a node listens on "
                   "/clock, a tick of its own once no command came for this long (wall s; 0 = "
                   "never): controller_manager under use_sim_time waits for the clock to move "

@@ -28,7 +28,7 @@ from ..services.parameter_services import could_not_apply
 from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, resolve_parameters,
                                  scene_defaults)
 from ..params.values import ParameterRefused
-from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
+from ..schedule import TickSchedule
 from ..services.simulation import SimulationControl
 from ..wire.cdr import clock_cdr, joint_state_bytes
 from . import rclpy_simulation
@@ -125,7 +125,9 @@ class ArmSimNode(Node):
         self.schedule = TickSchedule(self.core.wall_clock())
         self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
+        self.readers = 0                # joint_states subscribers when last counted (lockstep)
         self._publish_clock()           # use_sim_time nodes (controller_manager) wait for one
+        self._publish_lockstep()        # in lockstep, the state the first command answers
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
@@ -136,20 +138,32 @@ class ArmSimNode(Node):
         self._publish_lockstep()
 
     def on_joint_command(self, message: JointState) -> None:
+        stamp = message.header.stamp
         self.core.on_joint_state_command(list(message.name), list(message.position),
-                                         list(message.velocity), list(message.effort))
+                                         list(message.velocity), list(message.effort),
+                                         stamp.sec * 10**9 + stamp.nanosec)
         self._publish_lockstep()
 
     def _publish_lockstep(self) -> None:
-        for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data, STATE_BEFORE_CLOCK)
+        for data in self.core.lockstep.take():   # lockstep: a tick per answer
+            self._publish(data)
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
         callback, as each spin costs Python time, still keeps real_time_factor). In
-        lockstep, where the commands tick: the time on /clock (paused: the held state)."""
-        if self.core.config.values["lockstep"] and self.on_tick() is None:
-            self._publish_clock()       # the time while lockstep waits (use_sim_time peers)
+        lockstep, where the answers tick: the time on /clock (or lockstep_wait's tick), and
+        the state awaiting its answer again to a subscriber that has matched since."""
+        if self.core.config.values["lockstep"]:
+            self._publish_lockstep()      # a play or a reset made one
+            idle = self.on_tick() is None
+            if idle:
+                self._publish_clock()     # the time while lockstep waits (use_sim_time peers)
+            readers = self.joint_state_publisher.get_subscription_count()
+            if readers > self.readers and idle and self.core.lockstep.published is not None:
+                self._publish_states(self.core.joint_state())
+            self.readers = readers
+            if idle:
+                self.core.recorder.idle()
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
@@ -160,10 +174,19 @@ class ArmSimNode(Node):
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
-        """joint_states and /clock; with sensors, the readings there and the state on
-        ~/true_joint_states at the same stamp. /clock `clock_after` s after the state (a
-        lockstep tick's STATE_BEFORE_CLOCK)."""
+    def _publish(self, data: JointStateData) -> None:
+        """joint_states (_publish_states), then /clock."""
+        self._publish_states(data)
+        if self.core.config.values["publish_clock"]:
+            if self.serialized:
+                self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
+            else:
+                self.clock_message.clock = _stamp(data.stamp_ns)
+                self.clock_publisher.publish(self.clock_message)
+
+    def _publish_states(self, data: JointStateData) -> None:
+        """joint_states; with sensors, the readings there and the state on
+        ~/true_joint_states at the same stamp."""
         self._publish_state(self.joint_state_publisher, data, self.joint_state_message)
         if data.truth is not None:
             if self.truth_publisher is None:
@@ -171,14 +194,6 @@ class ArmSimNode(Node):
                     JointState, TRUE_JOINT_STATES_TOPIC, 10)
                 self.truth_message = JointState()
             self._publish_state(self.truth_publisher, data.truth, self.truth_message)
-        if self.core.config.values["publish_clock"]:
-            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
-                time.sleep(clock_after)
-            if self.serialized:
-                self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
-            else:
-                self.clock_message.clock = _stamp(data.stamp_ns)
-                self.clock_publisher.publish(self.clock_message)
 
     def _publish_state(self, publisher, data: JointStateData, message: JointState) -> None:
         """`data` as the RMW's own bytes (cdr.py) where it writes them, else in `message`."""
