@@ -43,10 +43,7 @@ class Simulator:
         self.steps = 0
         self._build(scene)
         self.reset()
-        try:
-            guard.check_start(self)      # what it starts from is finite, or it is refused
-        except model.ParameterError as error:
-            raise SceneError(str(error)) from None
+        starts_finite(self)
 
     def _build(self, scene: Scene, command=None) -> None:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
@@ -232,6 +229,14 @@ class Simulator:
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
         return largest
+
+
+def starts_finite(sim: Simulator) -> None:
+    """SceneError (one line) where what sim starts from is not finite (guard.check_start)."""
+    try:
+        guard.check_start(sim)
+    except model.ParameterError as error:
+        raise SceneError(str(error)) from None
 
 
 def code_of(scene: Scene, command=None) -> tuple:
