@@ -248,23 +248,27 @@ def test_random_bytes_in_every_kind_of_kernel_cache_file_hunt(tmp_path, capsys):
     from node.test_node_dds import CONFIG
     node_env = {"ROS_DOMAIN_ID": "97", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                 "CYCLONEDDS_URI": CONFIG}
+    # every damage on a smooth scene; the three that break a file's inside on a switching
+    # scene (a module a mode) and on the node (the issue's: its exit 2 blamed the physics)
+    inside = ("random bytes", "truncated", "flipped bytes")
     commands = {
-        "run release": ARM_SIM + ["run", "--scene", "release", "--duration", "0.2", "--json"],
-        "run stick_slip": ARM_SIM + ["run", "--scene", "stick_slip", "--duration", "0.5",
-                                     "--json"],
-        "node release": [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds",
-                         "--duration", "0.1", "--quiet", "--ros-args", "-p",
-                         "real_time_factor:=0.0"]}
+        "run release": (ARM_SIM + ["run", "--scene", "release", "--duration", "0.2", "--json"],
+                        DAMAGES),
+        "run stick_slip": (ARM_SIM + ["run", "--scene", "stick_slip", "--duration", "0.5",
+                                      "--json"], inside),
+        "node release": ([sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds",
+                          "--duration", "0.1", "--quiet", "--ros-args", "-p",
+                          "real_time_factor:=0.0"], inside)}
     rng = np.random.default_rng(47)
     cases = tracebacks = wrong = said_wrong = 0
     found, started = [], time.perf_counter()
-    for name, argv in commands.items():
+    for name, (argv, damages) in commands.items():
         env = node_env if name.startswith("node") else None
         good = tmp_path / f"good {name}"
         code, expected, err = run(argv, good, env)           # the first compile, kept
         assert code == 0, err
         for kind in ("py", "nbi", "nbc"):
-            for how in DAMAGES:
+            for how in damages:
                 cases += 1
                 cache = tmp_path / f"{name} {kind} {how}"
                 shutil.copytree(good, cache)
