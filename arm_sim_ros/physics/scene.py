@@ -259,7 +259,7 @@ def parse_value(key: str, text: str):
         if kind == "float":
             return _number(key, text)
         if kind == "int":
-            return _whole(text)
+            return _whole(key, text)
     except SceneError:
         raise
     except ValueError:
@@ -268,12 +268,12 @@ def parse_value(key: str, text: str):
     return text
 
 
-def _whole(text: str):
+def _whole(key: str, text: str):
     """An integer as written (`9223372036854775807`), never through a double, which holds
     whole numbers exactly only up to 2^53; `7.0` or `1e3` are read as doubles."""
     text = text.strip()
     if len(text.lstrip("+-")) > 400:           # int() refuses 4300 digits with a traceback
-        raise SceneError(f"an integer of {len(text)} digits is beyond any key's range")
+        raise SceneError(f"{key}: an integer of {len(text)} digits is beyond its range")
     try:
         return int(text)
     except ValueError:

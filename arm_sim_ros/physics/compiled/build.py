@@ -94,8 +94,8 @@ def available() -> bool:
         return False
     if numba is None:
         say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
-                  "slower with the same numbers; `pip install numba==0.68.1` gives the "
-                  "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
+                 "slower with the same numbers; `pip install numba==0.68.1` gives the "
+                 "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
         return False
     problem = unusable(cache_dir())
     if problem:

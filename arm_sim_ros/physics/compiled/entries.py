@@ -70,9 +70,10 @@ def reason(error: BaseException) -> str:
     return str(error) if isinstance(error, Damaged) else f"{type(error).__name__}: {error}"
 
 
+@lru_cache(maxsize=None)
 def checked_classes():
     """(CacheFile, FunctionCache): numba's, sealing what they write and setting aside what
-    they cannot read. Made on first use: numba is imported only on the compiled path."""
+    they cannot read. Made once, on first use: numba is imported only on the compiled path."""
     from numba.core import caching
 
     class CacheFile(caching.IndexDataCacheFile):
@@ -129,14 +130,9 @@ def checked_classes():
 def check_entries(module) -> None:
     """Give every numba function of a kernel module the checked cache (class swapped: the
     same state, only the reading and writing differ)."""
-    cache_file, function_cache = _classes()
+    cache_file, function_cache = checked_classes()
     for value in vars(module).values():
         cache = getattr(value, "_cache", None)
         if type(cache).__name__ == "FunctionCache" and not isinstance(cache, function_cache):
             cache.__class__ = function_cache
             cache._cache_file.__class__ = cache_file
-
-
-@lru_cache(maxsize=None)
-def _classes():
-    return checked_classes()
