@@ -55,7 +55,7 @@ def test_a_damaged_entry_is_set_aside_and_compiled_again_in_one_line(cache, caps
     capsys.readouterr()
     assert fresh(source).quadruple(1.5) == 6.0           # the later run: the right answer
     lines = capsys.readouterr().err.splitlines()
-    assert len(lines) == 1 and "was damaged" in lines[0] and "set aside" in lines[0]
+    assert len(lines) == 1 and "held a damaged entry" in lines[0] and "set aside" in lines[0]
     assert list(cache.rglob("*.damaged"))
     assert fresh(source).quadruple(1.5) == 6.0           # and the one after: rebuilt, quiet
     assert capsys.readouterr().err == ""

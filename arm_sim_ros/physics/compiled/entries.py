@@ -24,7 +24,7 @@ from functools import lru_cache
 
 SEAL = b"\n#arm_sim_ros sha256 "        # then the 64 hex digits of the pickle's SHA-256
 SEALED = len(SEAL) + 64
-SAID: set = set()                     # (directory, module) whose damage a line has said
+SAID: set = set()                     # the caches whose damage a line has said
 
 
 @lru_cache(maxsize=None)
@@ -53,17 +53,19 @@ def unsealed(data: bytes) -> bytes:
 
 
 def set_aside(path: str, why) -> None:
-    """Rename a damaged cache file to <path>.damaged and say so, once per module a process."""
+    """Rename a damaged cache file to <path>.damaged and say so: one line a cache a process,
+    naming the first (a disk that filled damages many files, of many modules, alike)."""
     try:
         os.replace(path, f"{path}.damaged")
     except OSError:
         pass                              # gone already (another process set it aside)
     directory, name = os.path.split(path)
-    module = name.partition(".")[0]
-    if (directory, module) not in SAID:   # its other files, damaged alike, add no line
-        SAID.add((directory, module))
-        print(f"arm_sim_ros: the kernel cache entry {module} in {directory} was damaged "
-              f"({name}: {why}); set aside as *.damaged and compiled again", file=sys.stderr)
+    cache = directory.removesuffix(f"{os.sep}__pycache__")
+    if cache not in SAID:
+        SAID.add(cache)
+        print(f"arm_sim_ros: the kernel cache {cache} held a damaged entry ({name}: {why}; "
+              "any more alike are not named); set aside as *.damaged and compiled again",
+              file=sys.stderr)
 
 
 def reason(error: BaseException) -> str:
