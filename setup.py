@@ -53,7 +53,7 @@ setup(
     entry_points={
         "console_scripts": [
             "arm-sim = arm_sim_ros.tools.cli:main",
-            "arm_sim_node = arm_sim_ros.node.main:main",
+            "arm_sim_node = arm_sim_ros.node.entry:main",   # signals handled before the imports
             "arm_sim_controllers = arm_sim_ros.tools.control.follower:main",
         ],
         # the fixtures `arm` and `arm_node` in every pytest run (arm_sim_ros/testing)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
-from math import inf, isfinite, radians
+from math import inf, isfinite
 from pathlib import Path
 
 from .. import yaml_files
@@ -16,16 +16,13 @@ from ..usage import did_you_mean
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .trust.unestimated import ESTIMATES
 from .effects import POLICIES, SERVO_POLICIES, JointLimits, Motors, scene_effects
-from .scene_values import MAPPINGS, SceneError, coerce_value
-from . import sensing
+from .scene_values import MAPPINGS, SceneError, checked
+from . import angles, sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError
 
 
-# Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
-ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
-              "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 
@@ -226,6 +223,16 @@ def _text(value) -> str:
     return str(list(value)) if isinstance(value, tuple) else str(value)
 
 
+def coerce_value(name: str, kind: str, value):
+    """`value` as the kind needs it (scene_values.checked), its numbers written in degrees
+    (`90deg`) in radians first, or SceneError saying why. Also the node's check for its
+    own numbers, text and pairs."""
+    value = in_radians(name, value)
+    if kind == "effect" and isinstance(value, dict):
+        value = {k: in_radians(f"{name}.{k}", v) for k, v in value.items()}
+    return checked(name, kind, value)
+
+
 def unknown_key(key: str) -> str:
     """Why `key` is no scene key, with the closest one (an effect's keys as effect.key)."""
     keys = [f"{effect}.{p.name}" for effect, cls in MAPPINGS.items() for p in cls.parameters]
@@ -281,13 +288,14 @@ def _whole(key: str, text: str):
 
 
 def _number(key: str, text: str) -> float:
-    """A number; an angle may be given in degrees as `90deg`."""
+    """A number; an angle may be given in degrees as `90deg` (angles.py)."""
     text = text.strip()
-    if text.endswith("deg"):
-        if key not in ANGLE_KEYS:
-            raise SceneError(f"{key}={text!r}: only angles take deg ({', '.join(ANGLE_KEYS)})")
-        return radians(float(text[:-3]))
-    return float(text)
+    return angles.degrees(key, text, SceneError) if text.endswith("deg") else float(text)
+
+
+def in_radians(key: str, value):
+    """`value` with its numbers in degrees in radians (angles.py's rule), or SceneError."""
+    return angles.in_radians(key, value, parse_value, SceneError)
 
 
 def scene_dirs() -> list[Path]:
@@ -313,7 +321,7 @@ def load_scene(name: str = "release") -> Scene:
     directory in it); the preset directories are searched in scene_dirs() order."""
     if name.endswith((".yaml", ".yml")) or os.sep in name:
         path = Path(name)
-        if not _is_file(path):
+        if not _is_file(path, Path.exists):     # a directory: yaml_files says so
             raise SceneError(f"scene file {name} does not exist")
         return scene_from_file(path, path.stem)
     for directory in scene_dirs():
@@ -325,9 +333,9 @@ def load_scene(name: str = "release") -> Scene:
                      f"{', '.join(names) or 'none found'} (or give a path to a .yaml file)")
 
 
-def _is_file(path: Path) -> bool:
+def _is_file(path: Path, test=Path.is_file) -> bool:
     try:
-        return path.is_file()
+        return test(path)
     except (OSError, ValueError):          # a name too long, a NUL byte in it
         return False
 
@@ -339,6 +347,9 @@ def scene_from_file(path: Path, name: str) -> Scene:
         raise SceneError(str(error)) from None
     if not isinstance(data := {} if data is None else data, dict):
         raise SceneError(f"scene file {path} must hold a mapping of keys to values")
+    if data and not set(data) & set(FIELD_KINDS):     # /etc/shadow: its lines never echoed
+        raise SceneError(f"{path} is not a scene file: not one of its keys is a scene key "
+                         "(`arm-sim scenes` lists the presets)")
     try:
         return Scene(name=name).replace(**data)
     except SceneError as error:

@@ -37,14 +37,14 @@ def _as_text(value) -> str:
             "exactly a double, as text; write 0.0 or a number in range)")
 
 
-def coerce_value(name: str, kind: str, value):
+def checked(name: str, kind: str, value):
     """`value` as the kind ("float", "int", "str", "pair", or a scene's "float_or_pair",
-    "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
-    its own numbers, text and pairs."""
+    "pair_or_none", "effect") needs it, or SceneError saying why (its numbers in radians
+    already: scene.coerce_value)."""
     if kind == "float_or_pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            return coerce_value(name, "float", value)
-        pair = coerce_value(name, "pair", value)
+            return checked(name, "float", value)
+        pair = checked(name, "pair", value)
         return 0.0 if pair == (0.0, 0.0) else pair
     if kind == "pair_or_none":
         return None if value is None else effect_value(name, EffortLimits.parameter, value)
@@ -75,7 +75,7 @@ def coerce_value(name: str, kind: str, value):
             raise SceneError(f"{name} must be a list of two numbers, got {brief(value)}")
         if len(value) != 2:
             raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
-        return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
+        return tuple(checked(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{name} must be a number, got {brief(value, 60)}{_as_text(value)}")
     try:

@@ -240,7 +240,7 @@ def test_a_dds_transport_node_started_first_is_found_by_a_later_rclpy_peer(monke
                CYCLONEDDS_URI=DISCOVERY_TAG)
     process = subprocess.Popen(
         [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--duration", "60",
-         "--quiet", "--ros-args", "-p", "gravity:=0.0"],
+         "--ros-args", "-p", "gravity:=0.0"],
         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         assert "scene release started" in process.stderr.readline()   # its endpoints exist

@@ -15,13 +15,14 @@ PACKAGE = Path(__file__).resolve().parents[2] / "arm_sim_ros"
 ORDER = {
     "base": ["usage", "interface", "yaml_files", "outputs"],
     "physics": ["model", "reports", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
-                "scene_values", "scene", "urdf", "compiled", "simulator", "batch", "metrics"],
+                "angles", "scene_values", "scene", "urdf", "compiled", "simulator", "batch",
+                "metrics"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
-             "recorder_link", "core", "transports", "main"],
+             "stop", "recorder_link", "core", "transports", "main", "entry"],
     "tools": ["arguments", "progress", "signals", "run", "wire", "control", "accuracy", "fit",
               "inspect", "batch", "urdf", "cli", "reference"],
-    "testing": ["trace", "loop", "wire", "controller", "evidence", "plugin", "launch"],
+    "testing": ["trace", "loop", "heard", "wire", "controller", "evidence", "plugin", "launch"],
 }
 LAYERS = list(ORDER)
 # Third-party modules a layer or group must never import (its promise, in DESIGN.md).

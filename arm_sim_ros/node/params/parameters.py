@@ -5,7 +5,7 @@ cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ...physics.effects import EffortLimits
@@ -205,6 +205,9 @@ class NodeConfig:
     values: dict
     scene: Scene
     steps_per_tick: int
+    # the parameters given a value other than the scene's default at start: the ones a
+    # physics that cannot be built is blamed on (rclpy hands every parameter over, set or not)
+    given: tuple = field(default=(), compare=False)
 
     @property
     def tick_period(self) -> float:
@@ -245,7 +248,8 @@ def resolve_parameters(overrides: dict) -> NodeConfig:
                                 for name in READ_ONLY))
     config = _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
     check_recording(config.values)
-    return config
+    return replace(config, given=tuple(n for n in overrides
+                                       if config.values[n] != coerce(SPECS[n], values[n])))
 
 
 def check_recording(values: dict, names=RECORDING) -> None:
