@@ -209,9 +209,10 @@ def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_name
                                 for p in kind.parameters}
     assert ({spec.name for spec in EFFECT_PARAMETERS} == keys
             == set(AT_START) | set(COMPLIANT) | set(SERVO) | set(SENSED))
-    # double, double[], string[] (the servo's interface names), string (sensors.velocity)
+    # double, double[], string[] (the servo's interface names), string (sensors.velocity),
+    # integer (sensors.seed)
     assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list",
-                                                         "str"}
+                                                         "str", "int"}
 
 
 @pytest.mark.parametrize("values", [AT_START, COMPLIANT, SERVO],
