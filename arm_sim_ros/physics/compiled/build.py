@@ -31,7 +31,7 @@ from functools import lru_cache, partial
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
-from . import cache
+from . import apart, cache
 from ..stepping import integrators
 from .kernels import KERNELS
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
@@ -249,6 +249,7 @@ def load(source: str):
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    apart.compile_apart(module)        # a first compile's memory goes with a child process
     return module
 
 
