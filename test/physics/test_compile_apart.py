@@ -72,3 +72,23 @@ def test_an_error_in_the_function_is_numbas_own(kernel):
                     "    return x + 'a'\n")
     with pytest.raises(numba.core.errors.TypingError, match="add"):
         module.broken(1.0)
+
+
+def test_an_entry_the_cache_lost_meanwhile_is_compiled_apart_again(kernel, monkeypatch):
+    """Two processes writing one function's cache index at once: the later write may drop
+    the other's entry (numba rewrites the index whole). A second child makes it again; where
+    that fails as well, this process compiles it."""
+    from arm_sim_ros.physics.compiled import apart
+    real, children = apart.in_child, []
+
+    def lost_once(module, function, args):
+        children.append(function)
+        return True if len(children) == 1 else real(module, function, args)
+    monkeypatch.setattr(apart, "in_child", lost_once)
+    module = kernel(SOURCE.format("3.0"))
+    assert module.twice(1.0) == 5.0
+    assert children == ["twice", "twice"] and compiled_here(module.twice) == []
+
+    monkeypatch.setattr(apart, "in_child", lambda module, function, args: True)   # always lost
+    assert module.twice(1) == 5.0
+    assert compiled_here(module.twice) == [(numba.int64,)]

@@ -54,16 +54,20 @@ class Compiler:
 
     def __init__(self, dispatcher, module):
         self.real, self.module, self.dispatcher = dispatcher._compiler, module, dispatcher
-        self.tried = set()
+        self.tried = {}          # {signature: children that compiled it (2: one failed)}
 
     def __getattr__(self, name):
         return getattr(self.real, name)
 
     def compile(self, args, return_type):
-        if getattr(_here, "depth", 0) == 0 and return_type is None and args not in self.tried:
-            self.tried.add(args)
+        # a second child where the first compiled but the cache lost its entry: numba
+        # rewrites a function's index whole, and another process may have written it meanwhile
+        tries = self.tried.get(args, 0)
+        if getattr(_here, "depth", 0) == 0 and return_type is None and tries < 2:
             if in_child(self.module, self.dispatcher.py_func.__name__, args):
+                self.tried[args] = tries + 1
                 raise CompiledApart
+            self.tried[args] = 2
         _here.depth = getattr(_here, "depth", 0) + 1
         try:
             return self.real.compile(args, return_type)
@@ -99,10 +103,12 @@ def compile_apart(module) -> None:
 
 
 def _retried(compile):
-    """Dispatcher.compile that loads from the cache what the child compiled."""
+    """Dispatcher.compile that loads from the cache what a child compiled (at most two
+    children a signature: Compiler.compile)."""
     def compile_loaded(signature):
-        try:
-            return compile(signature)
-        except CompiledApart:
-            return compile(signature)
+        while True:
+            try:
+                return compile(signature)
+            except CompiledApart:
+                continue
     return compile_loaded
