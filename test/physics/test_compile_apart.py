@@ -92,3 +92,47 @@ def test_an_entry_the_cache_lost_meanwhile_is_compiled_apart_again(kernel, monke
     monkeypatch.setattr(apart, "in_child", lambda module, function, args: True)   # always lost
     assert module.twice(1) == 5.0
     assert compiled_here(module.twice) == [(numba.int64,)]
+
+
+# A kernel module whose child never finishes its compile (it waits at import), for the stops
+WAITING_CHILD = """import os, time
+from numba import njit
+if os.getpid() != {parent}:                     # the child (the parent runs this too)
+    open({mark!r}, "w").write(str(os.getpid()))
+    time.sleep(120)
+
+@njit(cache=True)
+def f(x):
+    return x
+"""
+PARENT = """import os, sys
+os.environ["ARM_SIM_CACHE"] = sys.argv[2]
+from arm_sim_ros.physics.compiled import build
+build.load(sys.argv[1].replace("{parent}", str(os.getpid()))).f(1.0)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGKILL"])
+def test_a_child_ends_with_the_process_that_waits_for_it(tmp_path, stop):
+    """Ctrl-C or SIGTERM (KeyboardInterrupt where the process has no handler of its own):
+    subprocess.run ends the child. A process killed outright: the kernel ends it
+    (PR_SET_PDEATHSIG). No compile goes on for nobody."""
+    import os
+    import signal
+    import subprocess
+    import time
+    mark = tmp_path / "child"
+    source = WAITING_CHILD.format(parent="{parent}", mark=str(mark))
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, source, str(tmp_path / "cache")],
+                              stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (mark.exists() and mark.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    child = int(mark.read_text())
+    parent.send_signal(getattr(signal, stop))
+    parent.communicate(timeout=30)
+    deadline = time.monotonic() + 30
+    while os.path.exists(f"/proc/{child}") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not os.path.exists(f"/proc/{child}")

@@ -82,10 +82,12 @@ def in_child(module, function: str, args) -> bool:
     site = os.path.dirname(os.path.dirname(numba.__file__))     # where this numba lives
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [site, *filter(None, [os.environ.get("PYTHONPATH")])]))
-    try:
+    try:   # a session of its own: a Ctrl-C is this process's to act on (a stop between
+        # steps lets the compile end; an exception here ends the child: subprocess.run)
         done = subprocess.run([sys.executable, "-c", CHILD, module.__name__, module.__file__,
                                function, str(os.getpid())], input=pickle.dumps(args),
-                              capture_output=True, env=env, check=False)
+                              capture_output=True, env=env, check=False,
+                              start_new_session=True)
     except OSError:
         return False
     return done.returncode == 0
