@@ -25,10 +25,10 @@ from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
 from .schedule import Lockstep
-from .status import Interval, health, status_line
+from .status import Console, Interval, health, what_is_on
 
 
-class ArmSimCore(CommandInput):
+class ArmSimCore(CommandInput, Console):
     """Simulator + command handling + message assembly; transports call in, never the reverse."""
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
@@ -45,7 +45,7 @@ class ArmSimCore(CommandInput):
         self.recorder = RecorderLink(log, recorder if recorder is not None
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
-        self._event(started(config))
+        self._event(started(config, recording=self.recorder.recorder is not None))
         if warning := angle_warning(config.scene.initial_positions, node=True):
             log.warning(warning)
 
@@ -57,7 +57,7 @@ class ArmSimCore(CommandInput):
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
-        self.sim = build_simulator(config, SPECS) if sim is None else sim
+        self.sim = build_simulator(config, config.given or ("scene",)) if sim is None else sim
         self.config = config
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
@@ -152,6 +152,8 @@ class ArmSimCore(CommandInput):
                 servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
+        if self.interval.waiting:         # the status's pace counts from the first tick done
+            self.first_tick_done()
         return self.joint_state()
 
     def _note_lateness(self, wall_now: float) -> None:
@@ -207,37 +209,34 @@ class ArmSimCore(CommandInput):
         self._event(why)
 
     def finish(self) -> None:
-        self.recorder.finish()
+        self.log.info(self.stop_line(self.recorder.finish()))    # the recording closed first
 
     def real_time_factor(self, wall_now: float) -> float:
         return self.interval.real_time_factor(wall_now, self.sim.time)
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
-        """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
-        sub-steps and refused steps. Rates are over the interval since the previous call."""
+        """The 1 Hz status (diagnostics.py); rates over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
                                                          self.refused_commands, self.late_ticks)
         level, message = health(self.held, new_refused, new_late, self.sim.books_fault)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
-                                   {name: getattr(self, name) for name in COUNTERS})
+                                   {name: getattr(self, name) for name in COUNTERS},
+                                   self.commands.last_refusal)
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
 
-    def status_line(self, rtf: float) -> str:
-        """The one-line status the node prints each second."""
-        return status_line(self.sim, self.held, rtf, self.refused_commands)
 
-
-def started(config: NodeConfig) -> str:
-    """The start line: the recording's file, if any (scripts/run names a new one each run);
-    with a robot_description, every scene value the URDF replaced."""
+def started(config: NodeConfig, recording: bool = True) -> str:
+    """The start line: the scene, its step and method, and what is on (status.what_is_on:
+    the estimate, sensors and where the truth goes, command latency, lockstep, the recording,
+    named only where `recording` is under way; scripts/run names a new file each run); with a
+    robot_description, every scene value the URDF replaced."""
     scene, values = config.scene, config.values
     text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
-            f"{config.steps_per_tick} steps per tick")
-    if values["rerun_path"]:
-        text += f"; recording {values['rerun_path']}"
+            f"{scene.method}, {config.steps_per_tick} steps per tick; "
+            + "; ".join(what_is_on(scene, values, recording)))
     if values["robot_description"]:
         base = load_scene(values["scene"])
         changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))

@@ -143,6 +143,10 @@ class RecorderLink:
         if self.recorder is not None and hasattr(self.recorder, "flush"):
             self.call("flush", self.sim)
 
-    def finish(self) -> None:
+    def finish(self) -> bool:
+        """The recording finished; True when it was written whole (a recorder that failed
+        on the way, or none, is not)."""
+        alive = self.recorder is not None
         self.call("finish", self.sim)
-        self.recorder = None
+        written, self.recorder = alive and self.recorder is not None, None
+        return written

@@ -14,7 +14,8 @@ import threading
 import numpy as np
 
 from .loop import COMMANDS, Reading, command_pair
-from .wire import stamp_of, wire_env
+from .heard import stamp_of
+from .wire import wire_env
 
 WAIT = 0.05          # s a pass waits for a state before it looks whether to stop
 

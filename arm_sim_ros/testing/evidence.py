@@ -30,6 +30,7 @@ def write_csv(trace: Trace, path) -> None:
                comments="")
 
 
+
 def write_png(trace: Trace, path) -> None:
     import matplotlib
     matplotlib.use("Agg", force=False)
@@ -65,6 +66,5 @@ def write_rrd(trace: Trace, path) -> None:
               "joints/torque": trace.tau}
     if trace.reference is not None:
         series["joints/reference"] = trace.reference
-    series |= {f"energy/{name}": trace.books[name]
-               for name in ("kinetic", "stored", "inputs", "losses", "residual")}
+    series |= {f"energy/{name}": values for name, values in trace.energy().items()}
     write_series(path, trace.t, series)

@@ -15,52 +15,52 @@ from __future__ import annotations
 
 import pytest
 
-EVIDENCE = pytest.StashKey[list]()
+EVIDENCE = pytest.StashKey[dict]()
+
+
+def kept(traces: dict, source, run, *args, **options):
+    """run(*args, **options)'s trace, kept in `traces` under `source` for the evidence (a
+    node's latest replaces its earlier: each holds the whole run so far), a ControllerError's
+    too."""
+    from .loop import ControllerError
+    try:
+        traces[source] = run(*args, **options)
+    except ControllerError as error:
+        if error.trace is not None:
+            traces[source] = error.trace
+        raise
+    return traces[source]
 
 
 class Arm:
     """The `arm` fixture: closed loops in process, each trace kept for the evidence."""
 
-    def __init__(self, traces: list):
+    def __init__(self, traces: dict):
         self.traces = traces
 
     def run(self, controller, scene="release", seconds: float = 1.0, **options):
         """loop.closed_loop(controller, scene, seconds, **options): its Trace (rate=,
         command=, reference=, overrides=)."""
-        from .loop import ControllerError, closed_loop
-        try:
-            trace = closed_loop(controller, scene, seconds, **options)
-        except ControllerError as error:
-            if error.trace is not None:
-                self.traces.append(error.trace)
-            raise
-        self.traces.append(trace)
-        return trace
+        from .loop import closed_loop
+        return kept(self.traces, len(self.traces), closed_loop, controller, scene, seconds,
+                    **options)
 
 
 class ArmNodes:
     """The `arm_node` fixture: nodes in lockstep over the wire, stopped after the test."""
 
-    def __init__(self, directory, traces: list):
+    def __init__(self, directory, traces: dict, monkeypatch):
         self.directory, self.traces, self.nodes = directory, traces, []
+        self.monkeypatch = monkeypatch
 
     def __call__(self, scene: str = "release", parameters: dict | None = None, **options):
         from .wire import WireArm
         node = WireArm(scene, parameters, directory=self.directory, **options)
         self.nodes.append(node)
+        for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):   # rclpy.init() joins
+            self.monkeypatch.setenv(name, node.env[name])
         run = node.run
-
-        def kept(seconds: float):
-            from .loop import ControllerError
-            try:
-                trace = run(seconds)
-            except ControllerError as error:
-                if error.trace is not None:
-                    self.traces.append(error.trace)
-                raise
-            self.traces.append(trace)
-            return trace
-        node.run = kept
+        node.run = lambda seconds: kept(self.traces, node, run, seconds)
         return node
 
     def close(self) -> None:
@@ -72,14 +72,16 @@ class ArmNodes:
 def arm(request):
     """Run a controller (a Python callable: Reading -> two numbers) against a scene, in
     process: `arm.run(controller, "release", seconds=2.0, rate=1000.0, reference=[...])`."""
-    return Arm(request.node.stash.setdefault(EVIDENCE, []))
+    return Arm(request.node.stash.setdefault(EVIDENCE, {}))
 
 
 @pytest.fixture
-def arm_node(request, tmp_path):
+def arm_node(request, tmp_path, monkeypatch):
     """Start the node in lockstep on a private domain: `node = arm_node("release")`, then
-    your controller on `node.domain_id`, then `node.run(seconds)`."""
-    nodes = ArmNodes(tmp_path, request.node.stash.setdefault(EVIDENCE, []))
+    your controller on `node.domain_id` (for the test, this process's ROS_DOMAIN_ID and
+    ROS_AUTOMATIC_DISCOVERY_RANGE are the node's: rclpy.init() joins it), then
+    `node.run(seconds)`."""
+    nodes = ArmNodes(tmp_path, request.node.stash.setdefault(EVIDENCE, {}), monkeypatch)
     yield nodes
     nodes.close()
 
@@ -88,7 +90,7 @@ def arm_node(request, tmp_path):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
-    traces = item.stash.get(EVIDENCE, [])
+    traces = list(item.stash.get(EVIDENCE, {}).values())
     if report.when != "call" or not report.failed or not traces:
         return
     from .evidence import write

@@ -23,6 +23,7 @@ from ..physics.metrics import SETTLE_FRACTION, Performance
 COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "measured_q1", "measured_q2", "measured_qd1",
            "measured_qd2", "command1", "command2", "tau1", "tau2", "reference1", "reference2",
            "kinetic", "stored", "inputs", "losses", "residual")
+BOOKS = COLUMNS[-5:]
 
 
 @dataclass
@@ -99,11 +100,19 @@ class Trace:
 
     # -- rows --------------------------------------------------------------------------------
 
+    def energy(self) -> dict:
+        """The books by name (BOOKS), NaN where the trace has none (over the wire, a node
+        that writes no recording)."""
+        try:
+            return {name: np.asarray(self.books[name]) for name in BOOKS}
+        except KeyError:
+            return {name: np.full(len(self), np.nan) for name in BOOKS}
+
     def rows(self) -> np.ndarray:
         """(N, len(COLUMNS)) in COLUMNS' order; NaN where the trace has no reference."""
         reference = self.reference if self.reference is not None else \
             np.full(self.q.shape, np.nan)
-        b = self.books
+        b = self.energy()
         return np.column_stack([self.t, self.q, self.qd, self.measured_q, self.measured_qd,
                                 self.command, self.tau, reference, b["kinetic"], b["stored"],
                                 b["inputs"], b["losses"], b["residual"]])

@@ -55,3 +55,42 @@ def test_a_silent_controller_is_reported_naming_the_state_it_left(arm_node):
     with pytest.raises(ControllerError, match=r"no command answered the state at t = 0\.0+ s "
                                               r"within 1 s"):
         node.run(0.1)
+
+
+def transports():
+    """dds always; rclpy where it imports (ROS 2 sourced)."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return ["dds"]
+    return ["dds", "rclpy"]
+
+
+@pytest.mark.hunt
+@pytest.mark.parametrize("transport", transports())
+@pytest.mark.parametrize("busy", [0, 2], ids=["idle", "both cores busy"])
+def test_ten_runs_over_the_wire_give_one_trace_idle_or_loaded(arm_node, busy, transport):
+    """The same test ten times, with `busy` processes spinning beside it: one trace, bit for
+    bit (sensors on, so their draws are part of it), the node on either transport."""
+    import hashlib
+    import subprocess
+    import sys
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+                for _ in range(busy)]
+    digests = set()
+    try:
+        for _ in range(10):
+            node = arm_node("release", SCENE | {"sensors.seed": 9,
+                                                "sensors.position_noise": [1e-3, 1e-3],
+                                                "sensors.velocity": "differences"},
+                            transport=transport)
+            with Controller(pd, node):
+                trace = node.run(2.0)
+            node.close()
+            digests.add(hashlib.sha256(np.column_stack(
+                [trace.t, trace.q, trace.qd, trace.measured_q, trace.measured_qd,
+                 trace.command, trace.tau]).tobytes()).hexdigest())
+    finally:
+        for spinner in spinners:
+            spinner.kill()
+    assert len(digests) == 1, digests

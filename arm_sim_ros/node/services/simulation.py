@@ -66,7 +66,8 @@ class SimulationControl:
         `take_commands()`: hands the commands waiting to the core, so that a command sent
         (and acknowledged) before a step request acts in the steps: deterministic."""
         self.core, self.publish, self.take_commands = core, publish, take_commands
-        self.state = STATE_PLAYING
+        self.state = STATE_PAUSED if core.config.values["paused"] else STATE_PLAYING
+        core.paused = self.state == STATE_PAUSED
         self.calls = deque()          # StepSimulation calls, the first ticking
         self.epoch, self.why = 0, ""  # raised by play and stop: stepping begun before ends
         self.goal_running = lambda: False   # the SimulateSteps server's (it attaches it)

@@ -243,7 +243,7 @@ class DdsArmSimNode:
             if now >= next_status:
                 self._status(now, on_status)
                 next_status = now + 1.0
-        self._status(self.wall_clock(), on_status)
+        self._status(self.wall_clock(), None)     # the last diagnostics; the stop line says the rest
 
     def _status(self, now: float, on_status) -> None:
         self.name_watch.check()

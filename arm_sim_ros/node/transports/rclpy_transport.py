@@ -262,8 +262,6 @@ def run(ros_args: list, duration: float | None, status) -> int:
         while rclpy.ok() and (end_ns is None or
                               node.core.stamp_ns() - node.core.start_stamp_ns < end_ns):
             rclpy.spin_once(node, timeout_sec=0.1)
-        if status is not None:
-            status(node.core.status_line(node.core.real_time_factor(node.core.wall_clock())))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
