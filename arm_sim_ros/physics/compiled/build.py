@@ -31,7 +31,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
-from . import cache
+from . import apart, cache
 from .entries import check_entries, say_once, set_aside
 from ..stepping import integrators
 from .kernels import BATCH, BOOKS_PARTS, HELPERS, KERNELS, run_loop
@@ -339,7 +339,8 @@ def load(source: str):
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
-    check_entries(module)
+    check_entries(module)              # a damaged entry set aside: compiled again
+    apart.compile_apart(module)        # a first compile's memory goes with a child process
     return module
 
 
