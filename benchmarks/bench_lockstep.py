@@ -176,9 +176,9 @@ class Fixture:
         self.law.law.stdin.flush()
 
     def measure(self, seconds: float) -> float:
-        before, started = len(self.arm.states), time.perf_counter()
+        before, started = len(self.arm.heard.states), time.perf_counter()
         self.arm.run(seconds)
-        return (len(self.arm.states) - before) / (time.perf_counter() - started)
+        return (len(self.arm.heard.states) - before) / (time.perf_counter() - started)
 
     def close(self) -> None:
         self.law.close()

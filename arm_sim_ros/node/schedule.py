@@ -55,8 +55,11 @@ class Lockstep:
     never showed, as ros2_control's hardware interface stamps its own) answers the latest
     state on arrival."""
 
+    RESEND = 1.0                    # wall s: an unanswered state goes out again (delivery)
+
     def __init__(self):
         self.published = None       # the stamp of the latest state published in lockstep
+        self.sent = (0, -float("inf"))   # (matched readers, wall time) when it last went out
         self.answered = False       # its answer has come, the tick has not yet happened
         self.stale = 0              # answers to states answered already
         self.states = []            # states of lockstep ticks the transport has not published
@@ -70,7 +73,20 @@ class Lockstep:
         """`data` (a JointStateData) is the latest state, published once: it awaits its
         answer."""
         self.published, self.answered = data.stamp_ns, False
+        self.sent = (self.sent[0], float("inf"))      # just went out: RESEND from the next look
         return data
+
+    def resend(self, readers: int, now: float) -> bool:
+        """Whether the latest state, unanswered, goes out again now: to a reader that has
+        matched since (the first moment it can reach it), or RESEND after it last went out
+        (a reader that had matched by count before it could take it). It only repeats a
+        state: an answer to the copy after the first is stale, so nothing is reordered."""
+        count, when = self.sent
+        when = now if when == float("inf") else when     # published since: from this look
+        due = self.published is not None and not self.answered and (
+            readers > count or now - when >= self.RESEND)
+        self.sent = (readers, now if due else when)
+        return due
 
     def queue(self, data) -> None:
         """The latest state, for the transport to publish (take)."""

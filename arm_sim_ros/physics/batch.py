@@ -6,6 +6,9 @@ the step is the same compiled RK4 straight-line code, applied to arrays instead 
 Arms are independent, so they are stepped in cache-sized chunks (each chunk runs every
 step before the next chunk starts) and, optionally, chunks run on several threads: numpy
 releases the GIL inside its loops.
+
+Scenes of any effects, each with its own values, run to their Outcomes with run_scenes
+(rollouts/), which this module exports.
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ from .stepping.exponential import step_for
 from .model import ArmParameters, fold_payload
 from .scene import Scene, SceneError
 from .simulator import Simulator
+from .rollouts import Outcome, run_scenes  # noqa: F401  (many scenes, each to its Outcome)
 
 CHUNK = 32768                 # arms per chunk: a few hundred KB per array, stays in L2
 PAIR_PARAMETERS = ("link_lengths", "link_masses", "com_distances", "com_inertias",

@@ -16,6 +16,7 @@ from math import cos, sin
 from . import model
 from .effects import Channel, Effect, scene_effects
 from .sensing import drives
+from .stepping.integrators import source_code
 
 RIGID_BODY = [
     "    c = cos(q2)",
@@ -121,8 +122,8 @@ def assemble(arm: model.ArmParameters, effects, command=None, label: str = "") -
               [f"def torque({signature}):", "    return 0.0, 0.0"])
     source = "\n".join(lines) + "\n" + response_source(effects)
     names = "+".join(e.name for e in effects) or "free"
-    exec(compile(source, f"<rhs {label}, {names}>", "exec"), namespace)
-    exec(compile("\n".join(torque) + "\n", f"<joint torque {label}, {names}>", "exec"), namespace)
+    exec(source_code(source, f"<rhs {label}, {names}>"), namespace)
+    exec(source_code("\n".join(torque) + "\n", f"<joint torque {label}, {names}>"), namespace)
     return Dynamics(namespace["rhs"], source, tuple(effects), tuple(extra),
                     tuple(c.name for c in channels), tuple(c.kind for c in channels), arm,
                     namespace["torque"], command if command is not None else [0.0, 0.0],
@@ -210,7 +211,7 @@ def mode_functions(dynamics: Dynamics, mode, guards, requests=()):
         source += "\n".join([f"def requests({signature}):"] + terms
                              + [f"    return ({', '.join(requests)},)"]) + "\n"
     namespace = dict(dynamics.function.__globals__)
-    exec(compile(source, f"<rhs in mode {mode}>", "exec"), namespace)
+    exec(source_code(source, f"<rhs in mode {mode}>"), namespace)
     namespace["rhs"].source = rhs + "\n"       # compiled.py compiles it with the step
     namespace["rhs"].guards_source = guards_source if guards else ""
     return namespace["rhs"], namespace["probe"], namespace["guard"], namespace.get("requests")

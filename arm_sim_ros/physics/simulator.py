@@ -26,7 +26,7 @@ from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS
 from .stepping.exponential import step_for
-from .scene import Scene
+from .scene import Scene, SceneError
 from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle
 from .reports import Event, Sample
@@ -44,6 +44,7 @@ class Simulator:
         self.steps = 0
         self._build(scene)
         self.reset()
+        starts_finite(self)
 
     def _build(self, scene: Scene, command=None) -> None:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
@@ -55,7 +56,8 @@ class Simulator:
         self._rhs = self.dynamics.function
         self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
-            self._tableau, self.dynamics.active, self.arm, self.step_size)
+            self._tableau, self.dynamics.active, self.arm, self.step_size,
+            whole=scene.stability_plan == "off")
         if message:
             self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
@@ -212,6 +214,8 @@ class Simulator:
 
     def joint_torque(self, state=None) -> tuple[float, float]:
         """The torque the joints receive at `state` (now): after limits and windings."""
+        if self.dynamics.command is not self.dynamics.given:   # a control loop's torque
+            settle(self)
         return tuple(self.dynamics.joint_torque(self.state if state is None else state))
 
     def sample(self) -> Sample:
@@ -229,6 +233,14 @@ class Simulator:
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
         return largest
+
+
+def starts_finite(sim: Simulator) -> None:
+    """SceneError (one line) where what sim starts from is not finite (guard.check_start)."""
+    try:
+        guard.check_start(sim)
+    except model.ParameterError as error:
+        raise SceneError(str(error)) from None
 
 
 def code_of(scene: Scene, command=None) -> tuple:
@@ -289,8 +301,8 @@ def steppers(sim: Simulator, scene: Scene) -> None:
     sim.sensing = sensing.attach(sim, scene)   # readings and a control loop act between steps
     sim.switching = switching_for(sim.dynamics, sim._tableau, step, sim.substeps, sim._emit,
                                   lambda: sim.time, getattr(sim, "switch_events", None))
-    sim.kernel = None if sim.sensing is not None and sim.sensing.active else compiled.kernel_for(
-        sim.dynamics, sim._step, sim.switching or sim._driver)
+    sim.kernel = compiled.kernel_for(sim.dynamics, sim._step, sim.switching or sim._driver,
+                                     sim.sensing)
     if sim.kernel is not None and sim.switching is not None and hasattr(step, "module"):
         sim.kernel.switched = Switched(step, sim._driver is not None)   # switch_run.py
     sim.path = getattr(step, "path", "python")
@@ -343,12 +355,16 @@ def sample(sim: Simulator) -> Sample:
 def readings(sim: Simulator) -> tuple:
     """(q1, q2, q̇1, q̇2) as the sensors read them now (physics/sensing/): the state's own
     without sensors that model something."""
-    return tuple(sim.state[:4]) if sim.sensing is None else sim.sensing.reading(sim)
+    if sim.sensing is None:
+        return tuple(sim.state[:4])
+    settle(sim)                  # what a compiled run holds of them
+    return sim.sensing.reading(sim)
 
 
 def recorded_row(sim) -> tuple:
     """What a recording keeps of a step: the state; with sensors, the readings after it;
     under a control loop (sensing/loop.py), the torque that acted over it."""
+    settle(sim)                  # the torque acting, as a compiled run holds it
     row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     looped = sim.dynamics.command is not sim.dynamics.given
     return row + tuple(sim.dynamics.command) if looped else row

@@ -33,6 +33,7 @@ SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy.command",     # accuracy
                       "arm_sim_ros.tools.urdf",         # urdf
                       "arm_sim_ros.tools.fit.command",          # fit
                       "arm_sim_ros.tools.fit.excitation",  # excite
+                      "arm_sim_ros.tools.sweep.command",   # sweep
                       "arm_sim_ros.tools.wire.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:

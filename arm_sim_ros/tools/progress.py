@@ -64,6 +64,7 @@ class Progress:
         self.bar = None
         self.compiled = compile_seconds()     # compiling so far
         self.pace_from = (self.started, 0.0)  # (when, done): the pace is measured from here
+        self.own = None                       # the work's seconds, where its caller measures
 
     def update(self, done: float) -> None:
         self.done = done
@@ -88,8 +89,18 @@ class Progress:
             self.lines.say(f"{self.label}: {done:.6g} of {self.total:.6g} {self.unit} "
                            f"({100 * fraction:.1f} %), {self.left(now)}")
 
+    def measured(self, seconds: float) -> None:
+        """The work's own wall seconds so far, as its caller measured them (work done in
+        other processes, their compiling left out): the time left is paced by them."""
+        self.own = seconds
+
     def left(self, now: float) -> str:
-        """"about N left", from the pace since the last compile ended; or why not yet."""
+        """"about N left", from the pace since the last compile ended (or the caller's own
+        measure of the work); or why not yet."""
+        if self.own is not None:
+            if self.own <= 0 or self.done <= 0:
+                return "time left not known yet"
+            return f"about {_duration(self.own * (self.total - self.done) / self.done)} left"
         since, done_then = self.pace_from
         if now - since < PACE_AFTER or self.done <= done_then:
             return "time left not known yet"

@@ -8,6 +8,7 @@ import math
 import pytest
 
 from arm_sim_ros.node.core import ArmSimCore
+from arm_sim_ros.node.schedule import Lockstep
 from arm_sim_ros.node.params.parameters import resolve_parameters
 from arm_sim_ros.node.services import simulation as s
 from arm_sim_ros.node.services.simulation import SimulationControl
@@ -146,3 +147,18 @@ def test_the_awaited_state_goes_again_to_each_reader_that_matches_later():
     # the reader already there hears it a second time, the same stamp: an answer to it after
     # the first is stale (see above), so a controller may answer every copy it hears
     assert peer.read(peer.joint_states, 1, msg.JointState)[0].header == first[0].header
+
+
+def test_an_unanswered_state_goes_out_again_to_a_new_reader_or_after_a_while():
+    """Delivery, not order: a copy of the latest state, the same stamp (an answer to the
+    copy after the first is stale), to a reader that matched since it went out, or RESEND s
+    after (a reader counted as matched before it could take it). Answered: never."""
+    lockstep = Lockstep()
+    assert not lockstep.resend(1, 0.0)                       # nothing published yet
+    lockstep.latest(type("State", (), {"stamp_ns": 10})())
+    assert not lockstep.resend(1, 5.0)                       # just went out: counting from here
+    assert lockstep.resend(2, 5.1)                           # a reader more
+    assert not lockstep.resend(2, 5.1 + Lockstep.RESEND / 2)
+    assert lockstep.resend(2, 5.1 + Lockstep.RESEND)         # unanswered that long
+    lockstep.answered = True
+    assert not lockstep.resend(3, 100.0)

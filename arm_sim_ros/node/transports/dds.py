@@ -103,7 +103,6 @@ class DdsArmSimNode:
         self.core = ArmSimCore(node_config, self.log, wall_clock, start_stamp_ns, recorder)
         self.simulation = SimulationControl(self.core, self._publish, self.take_commands)
         self.services.attach(self.core, self.simulation)
-        self.readers = 0           # joint_states readers matched when last counted (lockstep)
         self._publish_clock()      # use_sim_time nodes (controller_manager) wait for a first one
         self._publish_lockstep()   # in lockstep, the state the first command answers
 
@@ -266,18 +265,15 @@ class DdsArmSimNode:
 
 def lockstep_idle(node: DdsArmSimNode, now: float) -> None:
     """No answer came for LOCKSTEP_WAIT: the time on /clock (a use_sim_time peer may wait
-    for it), or lockstep_wait's tick of its own; the state awaiting its answer again to a
-    reader of joint_states that has matched since (a controller that joined after it went
-    out: a reader's match is when it can be delivered, not a wall-clock time); and what the
-    recorder keeps, to its file."""
+    for it), or lockstep_wait's tick of its own; the state awaiting its answer again where
+    it may not have reached a controller (schedule.Lockstep.resend); and what the recorder
+    keeps, to its file."""
     core = node.core
     data = core.tick(now, clock_listened(core, node.clock_writer))
     if data is None:
         node._publish_clock()
     else:
         node._publish(data)
-    readers = msg.matched(node.joint_state_writer)
-    if readers > node.readers and data is None and core.lockstep.published is not None:
+    if data is None and core.lockstep.resend(msg.matched(node.joint_state_writer), now):
         node._publish_states(core.joint_state())
-    node.readers = readers
     core.recorder.idle()

@@ -12,6 +12,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -110,22 +111,28 @@ class ArmSimNode(Node):
         # else these, filled anew every tick (not `_clock`: rclpy's Node has its own)
         self.joint_state_message, self.clock_message = JointState(), Clock()
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        # Commands and the tick timer in a group of their own: a step_simulation or
+        # simulate_steps coroutine holds the default group until it ends, and in lockstep
+        # each of its ticks waits for the command that answers the state before it (and the
+        # timer sends that state again where it may not have reached the controller).
+        self.loop_group = commands = MutuallyExclusiveCallbackGroup()
         self.command_subscription = self.create_subscription(
-            Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
+            Float64MultiArray, COMMAND_TOPIC, self.on_command, 10, callback_group=commands)
         self.joint_command_subscription = self.create_subscription(
-            JointState, values["joint_commands_topic"], self.on_joint_command, 10)
+            JointState, values["joint_commands_topic"], self.on_joint_command, 10,
+            callback_group=commands)
         self.setpoint_subscriptions = [
             self.create_subscription(Float64MultiArray, name,
                                      lambda message, field=field: self.on_setpoint(field, message),
-                                     10)
+                                     10, callback_group=commands)
             for field, name in SETPOINT_TOPICS.items()]
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
         self.simulation = SimulationControl(self.core, self._publish)
         self.simulation_services = rclpy_simulation.serve(self, self.simulation)
         self.schedule = TickSchedule(self.core.wall_clock())
-        self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
+        self.tick_timer = self.create_timer(config.wall_period, self.on_timer,
+                                            callback_group=self.loop_group)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
-        self.readers = 0                # joint_states subscribers when last counted (lockstep)
         self._publish_clock()           # use_sim_time nodes (controller_manager) wait for one
         self._publish_lockstep()        # in lockstep, the state the first command answers
 
@@ -152,16 +159,16 @@ class ArmSimNode(Node):
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
         callback, as each spin costs Python time, still keeps real_time_factor). In
         lockstep, where the answers tick: the time on /clock (or lockstep_wait's tick), and
-        the state awaiting its answer again to a subscriber that has matched since."""
+        the state awaiting its answer again where it may not have reached a controller
+        (schedule.Lockstep.resend)."""
         if self.core.config.values["lockstep"]:
             self._publish_lockstep()      # a play or a reset made one
             idle = self.on_tick() is None
             if idle:
                 self._publish_clock()     # the time while lockstep waits (use_sim_time peers)
-            readers = self.joint_state_publisher.get_subscription_count()
-            if readers > self.readers and idle and self.core.lockstep.published is not None:
+            if idle and self.core.lockstep.resend(
+                    self.joint_state_publisher.get_subscription_count(), self.core.wall_clock()):
                 self._publish_states(self.core.joint_state())
-            self.readers = readers
             if idle:
                 self.core.recorder.idle()
         self.schedule.run_due(self.core, self.on_tick)
@@ -243,7 +250,8 @@ class ArmSimNode(Node):
             return SetParametersResult(successful=False, reason=could_not_apply(changes, error))
         if {"publish_rate", "real_time_factor"} & set(changed):      # the wall period
             self.destroy_timer(self.tick_timer)
-            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer)
+            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer,
+                                                callback_group=self.loop_group)
         return SetParametersResult(successful=True)
 
     def destroy_node(self):

@@ -27,21 +27,24 @@ import inspect
 import os
 import re
 import sys
-from functools import lru_cache, partial
+from functools import lru_cache
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
-from . import cache
+from . import apart, cache
+from .entries import check_entries, say_once, set_aside
 from ..stepping import exponential
-from .kernels import KERNELS
+from .kernels import BATCH, BOOKS_PARTS, HELPERS, KERNELS, run_loop
+from . import draws, sensed as sensing
+from .batched import run_many
 from .switch_kernel import SWITCH_KERNEL, driver_source, template_items
 from ..model import MAX_ANGLE
+from ..dynamics import stage_terms
 
 try:              # in the default install where numba has a wheel (scripts/venv.bash)
     import numba
 except Exception as error:   # absent, or installed and broken (an llvmlite without its library)
     numba, MISSING = None, f"{type(error).__name__}: {error}"
-_say_once = lru_cache(maxsize=None)(partial(print, file=sys.stderr))   # a line, once a process
 if numba is not None:     # a first compile says so, and is timed (cache.py)
     from numba.core import event as numba_event
     cache.watch(numba_event)
@@ -85,27 +88,53 @@ BOOKS_CONSTANTS = {**{n: getattr(controller, n) for n in ("KI", "KP", "KEEP", "S
                    "GIVE_UP": accuracy.GIVE_UP, "NO_GAIN": accuracy.NO_GAIN,
                    "THREE_LEVELS": accuracy.THREE_LEVELS,
                    "MAX_ANGLE": MAX_ANGLE}
-STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction")
+STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_model", "friction",
+             "servo")
 
 
 def available() -> bool:
-    """numba imports (else one line says why), ARM_SIM_COMPILED is not 0, the cache writable."""
+    """numba imports, ARM_SIM_COMPILED is not 0, the cache a writable directory: else the
+    pure-Python path, one line saying why (but for ARM_SIM_COMPILED=0, which chose it)."""
     if os.environ.get("ARM_SIM_COMPILED", "1") == "0":
         return False
     if numba is None:
-        _say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
-                  "slower with the same numbers; `pip install numba==0.68.1` gives the "
-                  "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
+        say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
+                 "slower with the same numbers; `pip install numba==0.68.1` gives the "
+                 "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
         return False
+    problem = unusable(cache_dir())
+    if problem:
+        say_once(f"arm_sim_ros: the kernel cache {cache_dir()} {problem}: the pure-Python "
+                 "path, slower with the same numbers; set ARM_SIM_CACHE to a writable "
+                 "directory (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
+    return not problem
+
+
+@lru_cache(maxsize=None)
+def unusable(directory: Path) -> str | None:
+    """Why the kernel cache `directory` cannot be used (a file there, no write permission),
+    None if it can: made if missing, and written to once, as numba will write to it (once
+    a process: every simulator asks)."""
+    if directory.exists() and not directory.is_dir():
+        return "is a file, not a directory"
     try:
-        cache_dir().mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return False
-    return os.access(cache_dir(), os.W_OK)
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".probe.{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        return f"is not a writable directory ({error.strerror or error})"
+    return None
 
 
 def cache_dir() -> Path:
     return Path(os.environ.get("ARM_SIM_CACHE") or Path.home() / ".cache" / "arm_sim_ros")
+
+
+@lru_cache(maxsize=1024)
+def capitals(text: str) -> frozenset:
+    """The names in capitals a generated text reads (its constants), once per text."""
+    return frozenset(re.findall(r"\b[A-Z][A-Z0-9_]*\b", text))
 
 
 def _signature(width: int) -> str:
@@ -124,11 +153,11 @@ def rhs_source(source: str, names) -> str:
     return "\n".join([lines[0].replace("):", ", K):"), *_reads(names), *lines[1:]]) + "\n"
 
 
-def step_source(step, names) -> str:
+def step_source(text: str, names) -> str:
     """The generated step with f(...) the module's rhs(..., K), its constants from K; and
     step_from(y, h, K, first), the same step with its first stage's slopes given (the rhs
     at y: a check's step and its first half share them, the same numbers computed once)."""
-    source = step.source.replace("def step(f, y, h):", "def step(y, h, K):\n"
+    source = text.replace("def step(f, y, h):", "def step(y, h, K):\n"
                                  + "\n".join(_reads(names)))
     source = source.replace("f.response(q1, q2)", "response(q1, q2, K)")   # (exponential.py)
     given = re.sub(r"= f\(([^)]*)\)", "= first", source.replace(
@@ -187,41 +216,90 @@ def functions_source(text: str, names) -> str:
     return re.sub(r"probe\(([^)]*)\)\[2:\]", r"probe(\1, K)[2:]", "\n".join(out))
 
 
-def module_source(dynamics, step, rhs=None, guards=""):
+SET_POINTS = {f"SP{k}": 0.0 for k in range(6)}   # a continuous servo's, read from K
+
+
+def set_points(source: str) -> str:
+    """A continuous servo's set-points SP[k] (a list the node changes) as constants SPk,
+    which the kernel writes into K before each call (runs.Kernel.given)."""
+    return re.sub(r"\bSP\[(\d)\]", r"SP\1", source)
+
+
+def torque_source(dynamics) -> str:
+    """torque(q1, q2, u1, u2, *extra): the torque the joints receive (Simulator.joint_torque,
+    the same lines: the mode-free stage terms), for recorded(T, row, state, K), which writes
+    a trajectory's row (q1, q2, q̇1, q̇2, τ1, τ2)."""
+    names = ", ".join(["q1", "q2", "u1", "u2", *dynamics.extra])
+    drives = any(effect.drives for effect in dynamics.active)
+    return "\n".join([f"def torque({names}):", *(stage_terms(dynamics.active) + [
+        "    return t1, t2"] if drives else ["    return 0.0, 0.0"])]) + "\n"
+
+
+RECORDED = """
+@njit(cache=True)
+def recorded(T, row, state, K):
+    t1, t2 = torque({slopes}, K)
+    T[row, 0], T[row, 1], T[row, 2], T[row, 3] = state[0], state[1], state[2], state[3]
+    T[row, 4], T[row, 5] = t1, t2
+"""
+
+
+def module_source(dynamics, step, rhs=None, guards="", sensed=False, energy=None):
     """(source, constant names): the module of rhs (the scene's, or a mode's `rhs` source),
     step, residual and the kernels, all njit; with a mode's `guards` (its probe and guard
     source), its switching run too (switch_kernel.py). Constants are read from K
     (constants_of), not written in: the source, and so the compiled code, depends on the
-    scene's structure only, not on its parameter values (a parameter sweep compiles once)."""
-    rhs = dynamics.source if rhs is None else rhs
-    values = {**dynamics.function.__globals__, **getattr(step, "constants", {})}
+    scene's structure only, not on its parameter values (a parameter sweep compiles once).
+    `sensed`: run_books takes the sensors' samples and the control loop's (sensed.py);
+    `energy`: energy_source's, where the caller has it."""
+    rhs = set_points(dynamics.source if rhs is None else rhs)
+    values = {**dynamics.function.__globals__, **getattr(step, "constants", {}), **SET_POINTS}
     guards = guards and guards + driver_source(dynamics)
-    found = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", rhs + step.source + guards))
+    torque = set_points(torque_source(dynamics))
+    found = capitals(rhs) | capitals(step.source) | capitals(guards) | capitals(torque)
     names = sorted(n for n in found if n in values and isinstance(values[n], (int, float))
                    and not isinstance(values[n], bool))
-    lines = ["from math import ceil, cos, exp, isfinite, sin", "from numba import njit, prange", ""]
-    if "COEFFICIENTS" in step.source:    # the exponential step's coefficients, compiled too
+    energy = energy_source(dynamics) if energy is None else energy
+    return module_text(rhs, step.source, guards, torque, tuple(names),
+                       energy[0] if energy else NO_ENERGY, tuple(dynamics.extra),
+                       len(dynamics.channels), sensed), names
+
+
+@lru_cache(maxsize=256)
+def module_text(rhs: str, step_text: str, guards: str, torque: str, names: tuple, energy: str,
+                extra: tuple, channels: int, sensed: bool) -> str:
+    """The module's text from what module_source found: written once per structure in a
+    process (a sweep builds a simulator per sample)."""
+    lines = ["from math import ceil, cos, exp, inf, isfinite, log1p, sin",
+             "import numpy as np", "from numba import njit, prange", ""]
+    if "COEFFICIENTS" in step_text:    # the exponential step's coefficients, compiled too
         lines += [f"PHI_SERIES = {exponential.PHI_SERIES!r}",
                   "@njit(cache=True)\n" + inspect.getsource(exponential.phi),
                   "@njit(cache=True)\n" + inspect.getsource(exponential.exponential_rk4),
                   "COEFFICIENTS = exponential_rk4"]
-    width = 4 + len(dynamics.extra) + len(dynamics.channels)
-    energy = energy_source(dynamics)
+    width = 4 + len(extra) + channels
     # the rhs (and beside it, with windings, its response: dynamics.response_source)
-    lines += [functions_source(rhs, names), "@njit(cache=True)", step_source(step, names)]
-    lines.append(energy[0] if energy else NO_ENERGY)
+    lines += [functions_source(rhs, names)]
+    for function in (step_source(step_text, names), rhs_source(torque, names)):
+        lines += ["@njit(cache=True)", function]
+    lines.append(energy)
     fill = dict(items=", ".join(f"y[{k}]" for k in range(width)),
-                slopes=", ".join(f"state[{k}]" for k in range(4 + len(dynamics.extra))),
+                slopes=", ".join(f"state[{k}]" for k in range(4 + len(extra))),
                 zitems=", ".join(f"z[{k}]" for k in range(width)),
                 ditems=", ".join(f"state[{k}] - D[{k}] if {k} < states else state[{k}]"
                                  for k in range(width)),
                 columns=", ".join(f"Y[{k}, a]" for k in range(width)),
                 width=width, **BOOKS_CONSTANTS)
-    lines.append(KERNELS.format(**fill))
+    kernels = KERNELS if not sensed else HELPERS + run_loop(
+        **(BOOKS_PARTS | sensing.parts(extra, width))) + BATCH
+    if sensed:
+        lines += [draws.source(), sensing.SENSING]
+    lines.append(kernels.format(**fill) + RECORDED.format(**fill)
+                 + run_many(sensing.MORE if sensed else ""))
     if guards:
         lines += [functions_source(guards, names),
-                  SWITCH_KERNEL.format(**fill, **template_items(4 + len(dynamics.extra)))]
-    return "\n".join(lines) + "\n", names
+                  SWITCH_KERNEL.format(**fill, **template_items(4 + len(extra)))]
+    return "\n".join(lines) + "\n"
 
 
 def constants_of(names, values, command=(0.0, 0.0)):
@@ -230,37 +308,56 @@ def constants_of(names, values, command=(0.0, 0.0)):
     return np.array([command[0], command[1], *(values[n] for n in names)], dtype=float)
 
 
+@lru_cache(maxsize=256)
 def module_name(source: str) -> str:
     """The cached module's name: the hash of its text, so a changed text is a new module."""
     return f"arm_sim_kernel_{hashlib.sha256(source.encode()).hexdigest()[:20]}"
 
 
 def load(source: str):
-    """The module of `source`, written once to the cache directory under its hash."""
+    """The module of `source`, written once to the cache directory under its hash; a file
+    there that is not that text (cut short, garbage) is set aside and written anew, and
+    numba's files of its functions are read checked (entries.py)."""
     name = module_name(source)
     if name in sys.modules:
         return sys.modules[name]
     directory = cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.py"
-    if not path.is_file() or path.read_text() != source:
+    text = source.encode()
+    try:
+        written = path.read_bytes()
+    except FileNotFoundError:
+        written = None
+    except OSError as error:          # a directory in its place, unreadable
+        written = error.strerror or str(error)
+    if written != text:
+        if written is not None:       # numba's files of it go stale with its new stamp
+            set_aside(str(path), "not the text its name's hash names"
+                      if isinstance(written, bytes) else written)
         temporary = path.with_suffix(f".{os.getpid()}.tmp")
-        temporary.write_text(source)
+        temporary.write_bytes(text)
         os.replace(temporary, path)        # atomic: two processes may write it at once
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    check_entries(module)              # a damaged entry set aside: compiled again
+    apart.compile_apart(module)        # a first compile's memory goes with a child process
     return module
 
 
-def compilable(dynamics, step) -> bool:
+def compilable(dynamics, step, servo: bool = False) -> bool:
     """numba on, a fixed step, no servo, and every constant the rhs reads a number (MIN and
     MAX, the clamps' functions, become min and max). A servo's set-points are a list the node
     changes: Python's path, on every interface (an effort joint reads none), so that a switch
-    of interface while the node runs never meets a first compile (seconds without a tick)."""
+    of interface while the node runs never meets a first compile (seconds without a tick).
+    A servo sampled by a control loop is the torque it acts with (its law is the loop's,
+    sensed.py, the same on every interface): compiled. `servo`: a continuous servo too (its
+    set-points read from K: rollouts, where no interface changes)."""
     values = dynamics.function.__globals__
-    names = set(re.findall(r"\b[A-Z][A-Z0-9_]*\b", dynamics.source)) - {"MIN", "MAX"}
+    names = capitals(dynamics.source) - {"MIN", "MAX"}
     return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
-            and not any(effect.name == "servo" for effect in dynamics.active)
+            and not any(effect.name == "servo" and effect.acting is None
+                        and not (servo and not effect.rate) for effect in dynamics.active)
             and all(isinstance(values.get(n, 0.0), (int, float)) for n in names))

@@ -15,7 +15,7 @@ Python's, the state before it in S).
 
 RUN = '''
 @njit(cache=True)
-def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
+def NAME(y, z, L, O, G, S, I, F, K, C, left, TMORE):
     """DOC"""
     steps, due, since, taken, n, every = I[0], I[1], I[2], I[3], I[4], I[5]
     floor, fcap, cap, most, capped, states = I[6], I[7], I[8], I[9], I[10], I[11]
@@ -26,7 +26,9 @@ def NAME(y, z, L, O, G, S, I, F, K, C, leftMORE):
     state = ({items},)
     shade = ({zitems},)
     done, code = 0, 0
+    unsensed, a0, a1 = state, K[0], K[1]
     while done < left:
+SENSE
 CHECK
         new_every, wanted, count = every, n, n     # count: this step's sub-steps
         z1, at_shadow = state, False              # the shadow's step, taken in the check
@@ -62,6 +64,7 @@ SHADOW
         before, state = state, new
         steps += 1
         done += 1
+COMMIT
         r = residual(state, C, E0, R0, R1)    # guard.divergence and guard.audit
         ok, in_play = audited(state, r, C, E0, R0, lowest, in_play, fault,
                               steps % {CHECK_EVERY!r} == 0)
@@ -71,6 +74,9 @@ SHADOW
             code = 2
             break
         largest = bigger(largest, abs(r))
+        if T.shape[0] > 0:                    # a trajectory asked for: this step's row
+            recorded(T, done - 1, state, K)
+RESTORE
     sound = steps if code != 2 else steps - 1
     handed(y, z, state, shade, I, F, steps, due, since, taken, n, every, known, zvalid, lost,
            largest, far, in_play, estimate, previous)
@@ -80,11 +86,14 @@ SHADOW
 
 def run_loop(**parts) -> str:
     """RUN with its parts (NAME, MORE arguments, DOC, CHECK, PLAIN, CHECKED, AFTER, SHADOW,
-    NEXT) written in: run_books here, run_switching (switch_kernel.py) from the same loop."""
+    NEXT; SENSE, COMMIT and RESTORE where sensors act between steps: sensed.py) written in:
+    run_books here, run_switching (switch_kernel.py) from the same loop. T: the rows of the
+    trajectory asked for (torque.py), none when it has no rows."""
     text = RUN
+    parts = dict(dict.fromkeys(("SENSE", "COMMIT", "RESTORE"), ""), **parts)
     for marker in ("NAME", "MORE", "DOC", "NEXT"):
         text = text.replace(marker, parts[marker])
-    for marker in ("CHECK", "PLAIN", "CHECKED", "AFTER", "SHADOW"):
+    for marker in ("SENSE", "CHECK", "PLAIN", "CHECKED", "AFTER", "SHADOW", "COMMIT", "RESTORE"):
         text = text.replace(f"\n{marker}\n", "\n" + parts[marker] + "\n" if parts[marker]
                             else "\n")
     return text
@@ -141,7 +150,7 @@ BOOKS_PARTS = dict(     # run_books: a smooth scene's steps (Simulator.step)
                     now_shade = ({zitems},)
                 z1 = substepped(now_shade, h, count, K)''')
 
-KERNELS = '''
+HELPERS = '''
 @njit(cache=True)
 def bigger(a, b):
     return b if b > a else a
@@ -368,9 +377,8 @@ def audited(state, r, C, E0, R0, lowest, in_play, fault, peak):
         return False, in_play
     return True, play
 
-
-''' + run_loop(**BOOKS_PARTS) + '''
-
+'''
+BATCH = '''
 @njit(cache=True)
 def step_array(y, h, K):
     """One step from the array y (numba types an array argument faster than a tuple)."""
@@ -398,3 +406,4 @@ def advance_batch(Y, h, total, P):
         for k in range({width}):
             Y[k, a] = state[k]
 '''
+KERNELS = HELPERS + run_loop(**BOOKS_PARTS) + BATCH

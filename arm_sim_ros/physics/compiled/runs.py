@@ -9,8 +9,10 @@ from math import isfinite
 from ..stepping.stability import MAX_SUBSTEPS
 from ..trust import accuracy
 from ..trust.unestimated import Off
-from .build import compilable, constants_of, energy_source, load, module_source
+from ..effects.servo import servo_of
+from .build import SET_POINTS, compilable, constants_of, energy_source, load, module_source
 from .held import pack, unpack
+from .sensed import Sensed
 
 
 class Kernel:
@@ -26,18 +28,27 @@ class Kernel:
     def __deepcopy__(self, memo):   # machinery and scratch: nothing a step leaves behind
         return self
 
-    def __init__(self, dynamics, step, plain: bool):
+    def __init__(self, dynamics, step, plain: bool, sensing=None, energy=None):
         import numpy as np
         self.plain = plain        # runs of plain steps (no switches, no driver check)
-        source, names = module_source(dynamics, step)
+        # sensors and a control loop acting between steps (sensed.py), or None
+        self.sensed = Sensed(sensing) if sensing is not None and sensing.active else None
+        energy = energy_source(dynamics) if energy is None else energy
+        source, names = module_source(dynamics, step, sensed=self.sensed is not None,
+                                      energy=energy)
         self.module = load(source)
         self.K = constants_of(names, {**dynamics.function.__globals__,
-                                      **getattr(step, "constants", {})})
-        self.C = np.array([0.0, 0.0, *energy_source(dynamics)[1]])   # the residual's K
+                                      **getattr(step, "constants", {}), **SET_POINTS})
+        joint_servo = servo_of(dynamics)       # a continuous servo's set-points: into K
+        self.setpoints = [] if joint_servo is None or joint_servo.discrete else [
+            (2 + names.index(name), joint_servo.setpoint, k)
+            for k, name in enumerate(SET_POINTS) if name in names]
+        self.C = np.array([0.0, 0.0, *energy[1]])   # the residual's K
         width = 4 + len(dynamics.extra) + len(dynamics.channels)
         self.y, self.z, self.L, self.O, self.G, self.S, self.D, self.r = (
             np.zeros(width) for _ in range(8))      # r: the residual's, apart from the run's
         self.I, self.F = np.zeros(18, dtype=np.int64), np.zeros(16)
+        self.T = np.zeros((0, 6))      # the rows of a trajectory asked for (none)
         self.command = dynamics.command
         self.switched = None      # a switching scene's runs in one mode (switch_run.py)
         self.held = None          # (run, K, more, books) whose books the arrays hold
@@ -49,10 +60,10 @@ class Kernel:
         if (self.held is None or sim.state is not self.last) and not self.hold(sim):
             return False
         run, K, more, _ = self.held
-        K[0], K[1] = self.command
+        self.given(K)
         self.F[4] = 0.0
         done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
-                                     self.F, K, self.C, 1, *more)
+                                     self.F, K, self.C, 1, self.T, *more)
         if not done:
             self.settle(sim)
             return False
@@ -69,15 +80,21 @@ class Kernel:
         """(steps taken, largest |residual|) of Simulator.run without a callback: steps in
         one compiled call while nothing is to be said; the step Python must take (a switch,
         a driver, a new highest count, a fault ...) as Simulator.step, its residual
-        compiled."""
+        compiled. With rows in T, each step's row of the trajectory (recorded)."""
         if (self.held is None or sim.state is not self.last) and not self.hold(sim):
             sim.step_in_python()
+            self.record(sim, 0)
             return 1, max(largest, abs(self.residual(sim)))
         run, K, more, _ = self.held
-        K[0], K[1] = self.command
+        self.given(K)
         self.F[4] = largest
         done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
-                                     self.F, K, self.C, left, *more)
+                                     self.F, K, self.C, left, self.T, *more)
+        return self.after(sim, left, done, code, largest)
+
+    def after(self, sim, left: int, done: int, code: int, largest: float):
+        """Kernel.run after its compiled call took `done` of `left` steps and said `code`
+        (the arrays hold what it left: rollouts/batched.py calls this for a row of many)."""
         if done:
             sim.state = self.last = tuple(self.y.tolist())
             sim.steps, largest = int(self.I[0]), float(self.F[4])
@@ -85,11 +102,30 @@ class Kernel:
             self.settle(sim)
             sim._check_divergence()
             largest = max(largest, abs(self.residual(sim)))
+            self.record(sim, done - 1)
         if code != 1 or done == left:
             return done, largest
         self.settle(sim)
         sim.step_in_python()
+        self.record(sim, done)
         return done + 1, max(largest, abs(self.residual(sim)))
+
+    def record(self, sim, row: int) -> None:
+        """A step Python took (or checked) into row `row` of T, as recorded() writes one."""
+        if len(self.T):
+            self.T[row] = (*sim.state[:4], *sim.joint_torque())
+
+    def given(self, K) -> None:
+        """The command given (and a control loop's inputs) into K before a compiled call; under
+        a loop K holds the torque acting, which the loop sets."""
+        for at, setpoint, k in self.setpoints:
+            K[at] = setpoint[k]
+        if self.sensed is None:
+            K[0], K[1] = self.command
+        else:
+            self.sensed.refresh()
+            if self.sensed.loop is None:
+                K[0], K[1] = self.command
 
     def hold(self, sim) -> bool:
         """The simulator's books into the arrays for the compiled run of its next steps;
@@ -98,9 +134,12 @@ class Kernel:
         books = sim.accuracy
         if sim.diverged:
             return False
-        if self.plain and smooth(books):
-            run = (self.module.run_books, self.K, ())
-        elif self.switched is None or (run := self.switched.ready(self, sim, books)) is None:
+        if self.plain and smooth(books) and (self.sensed is None or self.sensed.ready(books)):
+            if self.sensed is not None:
+                self.sensed.pack(self.K)
+            run = (self.module.run_books, self.K, self.sensed.more if self.sensed else ())
+        elif self.sensed is not None or self.switched is None or (
+                run := self.switched.ready(self, sim, books)) is None:
             return False
         pack(self, sim, books)
         self.held, self.last, self.sound = (*run, books), sim.state, sim.steps
@@ -110,9 +149,11 @@ class Kernel:
         """The books the arrays hold back into Python's objects (nothing when none)."""
         if self.held is None:
             return
-        run, _, _, books = self.held
+        run, K, _, books = self.held
         self.held = None
         unpack(self, sim, books, self.sound)
+        if self.sensed is not None:
+            self.sensed.unpack(K)
         if run is not self.module.run_books:
             self.switched.landed(self, sim, books)
 
@@ -197,13 +238,16 @@ def steps_for(dynamics, step):
     return Steps(dynamics, step)
 
 
-def kernel_for(dynamics, step, stepped_elsewhere=None):
+def kernel_for(dynamics, step, stepped_elsewhere=None, sensing=None, servo=False):
     """The compiled kernel of a scene, or None (no numba, ARM_SIM_COMPILED=0, an adaptive
     step, or an effect whose stored energy has no compiled form); `stepped_elsewhere`
-    (switches located, a driver checked step by step): its residual only."""
-    if not compilable(dynamics, step) or energy_source(dynamics) is None:
+    (switches located, a driver checked step by step): its residual only; `sensing`: the
+    sensors and control loop its runs take (sensed.py); `servo`: a continuous servo's scene
+    too (build.compilable)."""
+    energy = compilable(dynamics, step, servo) and energy_source(dynamics)
+    if not energy:
         return None
-    return Kernel(dynamics, step, stepped_elsewhere is None)
+    return Kernel(dynamics, step, stepped_elsewhere is None, sensing, energy)
 
 
 def smooth(books) -> bool:

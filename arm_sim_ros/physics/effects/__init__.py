@@ -5,6 +5,8 @@ does not list contributes no code, no state, no channel and no cost.
 """
 from __future__ import annotations
 
+from functools import partial
+
 from .. import model
 from .actuator import POLICIES, Actuator
 from .base import Channel, Effect, Parameter, validate
@@ -83,9 +85,11 @@ def _payload_mass(scene) -> float:
 
 
 def _believed_torque(scene, arm, believed):
-    gravity = believed.gravity if believed is not None else scene.gravity
-    return (believed.gravity_torque if believed is not None
-            else lambda q: model.gravity_torque(arm, q, gravity))
+    """q -> the gravity torque the controller believes: model.gravity_torque of its arm and
+    gravity (a partial: the compiled control loop reads them, compiled/sensed.py)."""
+    if believed is not None:
+        return partial(model.gravity_torque, believed.arm, gravity=believed.gravity)
+    return partial(model.gravity_torque, arm, gravity=scene.gravity)
 
 
 def _servo(scene, arm, believed, command, windings) -> Servo:
@@ -110,8 +114,7 @@ def _actuator(scene, arm, believed, command, windings) -> Actuator | None:
         policy = "zero" if policy == "gravity_compensation" else "command"
     if policy == "zero" and not windings:
         return None
-    believed_torque = (believed.gravity_torque if believed is not None
-                       else lambda q: model.gravity_torque(arm, q, gravity))
+    believed_torque = _believed_torque(scene, arm, believed)
     fixed = (tuple(scene.constant_torque) if policy == "constant" else
              believed_torque(scene.initial_positions) if policy == "frozen_gravity" else None)
     return Actuator(policy, fixed, command, compensation=believed_torque,
