@@ -1,6 +1,7 @@
 """The compiled loops of compiled.py as source text: Simulator.run with its error books
-(run_books), the bare loop (the compiled limit) and a batch of arms. compiled.py fills in
-the state's entries and the books' constants and compiles them with numba.
+(run_books); the bare loop (the compiled limit) and a batch of arms are batched.py's.
+compiled.py fills in the state's entries and the books' constants and compiles them with
+numba.
 
 run_books does what Simulator.step does on a smooth scene, step after step, with the same
 operations in the same order: the planned sub-steps, the shadow beside them (shadow.py),
@@ -12,6 +13,7 @@ highest count, a tolerance out of reach, a lost estimate, a fault, a divergence)
 and leaves that step to Python (code 1: not taken; code 2: taken, its divergence check
 Python's, the state before it in S).
 """
+from .batched import BATCH
 
 RUN = '''
 @njit(cache=True)
@@ -377,33 +379,5 @@ def audited(state, r, C, E0, R0, lowest, in_play, fault, peak):
         return False, in_play
     return True, play
 
-'''
-BATCH = '''
-@njit(cache=True)
-def step_array(y, h, K):
-    """One step from the array y (numba types an array argument faster than a tuple)."""
-    return step(({items},), h, K)
-
-
-@njit(cache=True)
-def bare(y, h, total, K):
-    """`total` steps of h from y (in place), nothing else: the compiled limit."""
-    state = ({items},)
-    for n in range(total):
-        state = step(state, h, K)
-    for k in range({width}):
-        y[k] = state[k]
-
-
-@njit(cache=True, parallel=True)
-def advance_batch(Y, h, total, P):
-    """`total` steps of h for every arm (columns of Y, in place), arm a reading P[a]."""
-    for a in prange(Y.shape[1]):
-        K = P[a]
-        state = ({columns},)
-        for n in range(total):
-            state = step(state, h, K)
-        for k in range({width}):
-            Y[k, a] = state[k]
 '''
 KERNELS = HELPERS + run_loop(**BOOKS_PARTS) + BATCH
