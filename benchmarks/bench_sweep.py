@@ -85,7 +85,7 @@ def mujoco_rate(scenes, seconds: float, threads: int) -> float:
     datas = [mujoco.MjData(models[0]) for _ in range(threads)]
     steps = round(seconds / scenes[0].step_size)
     with rollout.Rollout(nthread=threads) as pool:
-        pool.rollout(models[:1], datas[:1], initial[:1], nstep=10)       # warm
+        pool.rollout(models[:1], datas, initial[:1], nstep=10)       # warm
         elapsed = timed(lambda: pool.rollout(models, datas, initial, nstep=steps))
     return len(scenes) / elapsed
 

@@ -94,11 +94,11 @@ def draws_module():
                       + draws.source() + '''
 @njit(cache=True)
 def many(seed, stream, joint, indices):
-    R = np.zeros(10, dtype=np.uint64)
-    R[0] = NEVER_BLOCK
+    R = np.zeros((1, 10), dtype=np.uint64)
+    R[0, 0] = NEVER_BLOCK
     out = np.empty(len(indices))
     for k in range(len(indices)):
-        out[k] = normal(R, seed, stream, joint, indices[k])
+        out[k] = normal(R, 0, seed, stream, joint, indices[k])
     return out
 ''')
 
