@@ -39,7 +39,8 @@ setup(
     ],
     extras_require={
         "test": ["pytest==9.0.3", "hypothesis==6.155.2",
-                 "pytest-xdist==3.8.0"],   # the suite on every core (setup.cfg: -n auto)
+                 "pytest-xdist==3.8.0",    # the suite on every core (setup.cfg: -n auto)
+                 "pandas==3.1.1"],         # the sweeps guide reads its table as a reader would
         "bench": ["mujoco==4.0.0"],
         "fit": ["dask==2026.8.0", "distributed==2026.8.0"],   # arm-sim fit --scheduler
         "fast": ["numba==0.68.1"],   # compiled rhs, steps and rollouts (physics/compiled/build.py)
@@ -53,8 +54,10 @@ setup(
     entry_points={
         "console_scripts": [
             "arm-sim = arm_sim_ros.tools.cli:main",
-            "arm_sim_node = arm_sim_ros.node.main:main",
+            "arm_sim_node = arm_sim_ros.node.entry:main",   # signals handled before the imports
             "arm_sim_controllers = arm_sim_ros.tools.control.follower:main",
         ],
+        # the fixtures `arm` and `arm_node` in every pytest run (arm_sim_ros/testing)
+        "pytest11": ["arm_sim_ros = arm_sim_ros.testing.plugin"],
     },
 )

@@ -16,9 +16,12 @@ EXIT_CODES = {
           "model explains the recording)",
     FAULT: "the work failed: `arm-sim run` faulted (a step was refused: `fault` and "
            "`refused_steps` in `--json`), `arm-sim fit` stopped at a bound before it converged "
-           "(which, and the best point), `arm-sim excite` faulted (no bag) or recorded a joint "
-           "that never moved, `arm-sim send-torque` found no subscriber, `arm-sim record` "
-           "received no message (no bag is left)",
+           "(which, and the best point) or the recording cannot identify a free key (which, "
+           "and why: it moves nowhere beyond its noise, or the key acts nowhere in it), "
+           "`arm-sim excite` faulted (no bag) or recorded a joint that never moved or whose "
+           "readings show none of its motion, `arm-sim send-torque` found no subscriber or "
+           "the node refused or ignores its commands (its /diagnostics say so), `arm-sim "
+           "record` received no message (no bag is left)",
     UNEXPLAINED: "`arm-sim fit` converged, but the fitted model does not explain the "
                  "recording (its verdict: more than 2 x the noise); the outputs are written",
     REFUSED: "refused input: one line on stderr says what and how to fix it; nothing started "

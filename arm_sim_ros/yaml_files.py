@@ -6,7 +6,9 @@ scene or parameter file never needs them, and a 700-byte alias bomb expands to g
 """
 from __future__ import annotations
 
+import os
 import re
+import stat
 
 import yaml
 
@@ -93,10 +95,14 @@ def _parsed(parse, what: str):
 def load(path, what: str = "file"):
     """Data from a YAML file (at most MAX_FILE_BYTES), string keys only in mappings."""
     try:
+        mode = os.stat(path).st_mode           # a pipe would block the read, a device not end
+        if not stat.S_ISREG(mode):
+            kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file (a device or a pipe)"
+            raise YamlFileError(f"{what} {path} is {kind}, not a YAML file")
         with open(path, "rb") as file:
             raw = file.read(MAX_FILE_BYTES + 1)
     except OSError as error:
-        raise YamlFileError(f"cannot read {what} {path}: {error.strerror}") from None
+        raise YamlFileError(f"cannot read {what} {path}: {error.strerror or error}") from None
     if len(raw) > MAX_FILE_BYTES:
         raise YamlFileError(f"{what} {path} is larger than {MAX_FILE_BYTES} bytes")
     try:

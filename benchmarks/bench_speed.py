@@ -2,7 +2,8 @@
 Python against compiled (extra `fast`), beside MuJoCo 4.0's RK4 on the same scene (mj_step
 called from Python) and the compiled limit; a windings scene naming no integrator against
 the plain arm; Batch against mujoco.rollout; and the windings integrated exactly
-(exponential_rk4) against rk4's sub-steps and MuJoCo's first-order dcmotor at equal step.
+(exponential_rk4) against rk4's sub-steps and MuJoCo's first-order dcmotor at equal step;
+and what a scene's first compile costs (first_compile: a new process each, an empty cache).
 
 Simulator.step table: µs per step at h = 1 ms, python and compiled (one compiled call per
 step: compiled/runs.py), estimate global (default tolerance) and off, mj_step and the
@@ -28,7 +29,7 @@ Each keeps the fastest of --repeat runs of --seconds simulated seconds after one
 (`first`: that run, compiling what it meets or loading it from the cache), a row's columns
 interleaved (each run once a round, so a slow spell falls on all of them), timed in CPU
 seconds of this process (the machine is shared: wall time would count the others' work),
-Batch in wall seconds (its threads share the work).
+Batch in CPU seconds and in wall seconds (its threads share the work).
 
     pip install -e '.[bench,fast]'
     nice python benchmarks/bench_speed.py [--seconds 2] [--repeat 3] [--arms 20000]
@@ -291,7 +292,9 @@ def unnamed_windings_table(seconds: float, repeat: int, long: float = 20.0) -> l
 
 
 def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
-    """Batch (numpy, compiled on 1 and 2 threads) against mujoco.rollout, effect-free."""
+    """Batch (numpy, compiled on 1 and 2 threads) against mujoco.rollout, effect-free: M
+    arm-steps per CPU second of the process (its threads' summed; what a shared machine's
+    load changes least) and per wall second (what threads buy on an idle machine)."""
     import mujoco
     from mujoco import rollout
 
@@ -299,8 +302,14 @@ def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
     rng = np.random.default_rng(0)
     positions = np.asarray(scene.initial_positions) + rng.uniform(-0.5, 0.5, (arms, 2))
     lines = [f"Batch, {arms} arms x {steps} steps of release (h = {scene.step_size:g} s), "
-             f"best of {repeat}: M arm-steps/s", "-" * 60]
-    for label, fast, threads in (("numpy (today)", False, 1), ("numpy, 2 threads", False, 2),
+             f"best of {repeat}: M arm-steps per second", f"{'':<28}{'CPU s':>8}{'wall s':>8}",
+             "-" * 44]
+
+    def row(label, run):
+        cpu = fastest(run, repeat, time.process_time)
+        wall = fastest(run, repeat, time.perf_counter)
+        lines.append(f"{label:<28}{arms * steps / cpu / 1e6:>8.2f}{arms * steps / wall / 1e6:>8.2f}")
+    for label, fast, threads in (("numpy", False, 1), ("numpy, 2 threads", False, 2),
                                  ("compiled, 1 thread", True, 1), ("compiled, 2 threads", True, 2)):
         os.environ["ARM_SIM_COMPILED"] = "1" if fast else "0"
         batch = Batch(scene, positions)
@@ -310,8 +319,7 @@ def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
         def run():
             batch.reset()
             batch.run(steps, threads)
-        elapsed = fastest(run, repeat, time.perf_counter)
-        lines.append(f"{label:<28}{arms * steps / elapsed / 1e6:>8.2f}")
+        row(label, run)
     model, ctrl = mujoco_peer.mujoco_model(scene, "RK4")
     datas = [mujoco.MjData(model) for _ in range(2)]
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -323,9 +331,8 @@ def batch_table(arms: int, steps: int, repeat: int) -> list[str]:
     for threads in (1, 2):
         with rollout.Rollout(nthread=threads) as pool:
             pool.rollout(model, datas[:threads], initial, nstep=steps)
-            elapsed = fastest(lambda: pool.rollout(model, datas[:threads], initial, nstep=steps),
-                              repeat, time.perf_counter)
-        lines.append(f"{f'mujoco.rollout, {threads} thread(s)':<28}{arms * steps / elapsed / 1e6:>8.2f}")
+            row(f"mujoco.rollout, {threads} thread(s)",
+                lambda: pool.rollout(model, datas[:threads], initial, nstep=steps))
     return lines
 
 
@@ -373,6 +380,40 @@ def windings_table(repeat: int) -> list[str]:
     return lines
 
 
+FIRST_COMPILE_RUNS = (("release", 2.0), ("stick_slip", 2.0), ("geared_arm", 0.3))
+
+
+def first_compile_table() -> list[str]:
+    """What a scene's first compile costs: `arm-sim run` in a new process with an empty kernel
+    cache (cold), then again with the cache it filled (warm); CPU seconds of the process
+    (numba compiles on one thread) and wall seconds. compile = cold - warm CPU: what
+    physics/compiled/cache.py's FIRST_COMPILE_CPU estimates (test/project/test_figures.py)."""
+    import resource
+    import subprocess
+    import tempfile
+
+    def timed(scene: str, seconds: float, cache: str) -> tuple:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "arm_sim_ros.tools.cli", "run", "--scene", scene,
+                        "--duration", str(seconds)], check=True, capture_output=True,
+                       env=os.environ | {"ARM_SIM_CACHE": cache})
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime,
+                time.perf_counter() - start)
+
+    lines = ["First compile: arm-sim run in a new process, empty kernel cache (cold), then the "
+             "cache it filled (warm); s",
+             f"{'scene':<14}{'simulated':>10}{'cold CPU':>10}{'cold wall':>10}{'warm CPU':>10}"
+             f"{'warm wall':>10}{'compile':>10}"]
+    for scene, seconds in FIRST_COMPILE_RUNS:
+        with tempfile.TemporaryDirectory() as cache:
+            cold, warm = timed(scene, seconds, cache), timed(scene, seconds, cache)
+        lines.append(f"{scene:<14}{seconds:>10g}{cold[0]:>10.1f}{cold[1]:>10.1f}{warm[0]:>10.1f}"
+                     f"{warm[1]:>10.1f}{cold[0] - warm[0]:>10.1f}")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=2.0)
@@ -396,14 +437,15 @@ def main() -> None:
               "presets": lambda: presets_table(args.seconds, args.repeat),
               "unnamed": lambda: unnamed_windings_table(args.seconds, args.repeat),
               "batch": lambda: batch_table(args.arms, args.batch_steps, args.repeat),
-              "windings": lambda: windings_table(args.repeat)}
+              "windings": lambda: windings_table(args.repeat),
+              "first_compile": first_compile_table}
     for name in args.tables.split(","):
         if name not in tables:
             sys.exit(f"bench_speed: no table {name!r}; choose from {', '.join(TABLES)}")
         print("\n".join(tables[name]()) + "\n", flush=True)
 
 
-TABLES = ("step", "presets", "unnamed", "batch", "windings")
+TABLES = ("step", "presets", "unnamed", "batch", "windings", "first_compile")
 
 
 if __name__ == "__main__":

@@ -33,8 +33,36 @@ python_too_old() {   # PYTHON WHAT FIX: true, after one line, when PYTHON is old
   return 0
 }
 
+install_reason() {   # STAMP CREATED: why pip runs now, in words
+  local stamp="$1" created="$2" installed_from
+  if [ "$created" = 1 ]; then
+    echo "the venv is new"
+  elif [ ! -f "$stamp" ]; then
+    if compgen -G "$venv/.arm_sim_ros-installed*" >/dev/null; then
+      echo "the extras ${extras:-of the package alone} are new to this venv"
+    else
+      echo "nothing of this checkout is installed in it yet"
+    fi
+  else
+    installed_from=$(cut -d' ' -f2- "$stamp")
+    if [ "$installed_from" != "$root" ]; then
+      echo "it was installed from another checkout, $installed_from"
+    else
+      echo "setup.py changed since its last install"
+    fi
+  fi
+}
+
+pip_install() {   # ARGS...: pip install, its progress on stderr (a line per package); pip's status
+  "$venv/bin/python" -m pip install --disable-pip-version-check --progress-bar off "$@" 2>&1 |
+    awk '/^Collecting / { print "scripts: pip: collecting " $2; fflush() }
+         /^Installing collected packages:/ { n = split($0, names, ",")
+           print "scripts: pip: installing " n " packages (the longest step)"; fflush() }' >&2
+  return "${PIPESTATUS[0]}"
+}
+
 ensure_venv() {
-  local extras="$1" stamp want target python="${ARM_SIM_PYTHON:-python3}"
+  local extras="$1" stamp want target created=0 python="${ARM_SIM_PYTHON:-python3}"
   if [ -x "$venv/bin/python" ] && [ ! -f "$venv/.arm_sim_ros-installed${extras:+-$extras}" ] &&
       python_too_old "$venv/bin/python" "the venv $venv" \
         "remove it and run again with ARM_SIM_PYTHON=pythonNEED (or newer)"; then
@@ -47,6 +75,7 @@ ensure_venv() {
     "$python" -m venv "$venv" || {
       echo "scripts: error: could not create a venv at $venv; on Debian/Ubuntu: apt-get install python3-venv" >&2
       exit 1; }
+    created=1
   fi
   stamp="$venv/.arm_sim_ros-installed${extras:+-$extras}"
   want=$(setup_stamp)
@@ -55,17 +84,17 @@ ensure_venv() {
   fi
   target="$root"
   [ -n "$extras" ] && target="$root[$extras]"
-  echo "scripts: installing $target into $venv (setup.py is new to this venv)" >&2
+  echo "scripts: installing $target into $venv ($(install_reason "$stamp" "$created")); about a minute on first set-up, one line per package" >&2
   # With the extra `fast` (numba: the compiled path) where a wheel exists for this machine;
   # numba is never built from source, and a machine without a wheel runs the pure-Python path.
-  "$venv/bin/python" -m pip install -q --disable-pip-version-check --only-binary numba,llvmlite \
-      -e "$root[${extras:+$extras,}fast]" 2>/dev/null || {
-    "$venv/bin/python" -m pip install -q --disable-pip-version-check -e "$target" || {
+  pip_install --only-binary numba,llvmlite -e "$root[${extras:+$extras,}fast]" || {
+    pip_install -e "$target" || {
       echo "scripts: error: pip could not install the dependencies (no network on first set-up?); run again when online" >&2
       exit 1; }
     echo "scripts: numba (the compiled path) has no wheel for this machine: the simulator runs its pure-Python path (slower, the same numbers)" >&2; }
   printf '%s\n' "$want" > "$stamp"
   # the full install also satisfies the plain one
   [ -n "$extras" ] && printf '%s\n' "$want" > "$venv/.arm_sim_ros-installed"
+  echo "scripts: installed; later runs start at once, with no network" >&2
   return 0
 }

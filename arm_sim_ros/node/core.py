@@ -24,10 +24,11 @@ from .diagnostics import COUNTERS, DiagnosticData, JointStateData, diagnostic_va
 from .params.parameters import LIVE, SCENE_PARAMETERS, SPECS, NodeConfig
 from .params.rebuild import build_simulator, change_live
 from .recorder_link import RecorderLink, make_recorder
-from .status import Interval, health, status_line
+from .schedule import Lockstep
+from .status import Console, Interval, health, what_is_on
 
 
-class ArmSimCore(CommandInput):
+class ArmSimCore(CommandInput, Console):
     """Simulator + command handling + message assembly; transports call in, never the reverse."""
 
     def __init__(self, config: NodeConfig, log, wall_clock=time.monotonic,
@@ -37,14 +38,14 @@ class ArmSimCore(CommandInput):
         self.warnings = RateLimitedLog(log, wall_clock)
         self.commands = CommandIntake(log, self.warnings)
         self.late_ticks = 0
-        self.lockstep_states = []         # JointStates of lockstep ticks not yet published
+        self.lockstep = Lockstep()        # which command answers which state
         self.paused = False               # no physics; the held state is published (simulation.py)
         self._elapsed_before_reset_ns = 0
         self._configure(config)
         self.recorder = RecorderLink(log, recorder if recorder is not None
                                      else make_recorder(config, log), self.sim,
                                      stamp_origin_ns=self.start_stamp_ns)
-        self._event(started(config))
+        self._event(started(config, recording=self.recorder.recorder is not None))
         if warning := angle_warning(config.scene.initial_positions, node=True):
             log.warning(warning)
 
@@ -52,10 +53,11 @@ class ArmSimCore(CommandInput):
     refused_commands = property(lambda self: self.commands.refused)
     command_timeouts = property(lambda self: self.commands.timeouts)
     command = property(lambda self: self.commands.value)
+    stale_commands = property(lambda self: self.lockstep.stale)
 
     def _configure(self, config: NodeConfig, sim: Simulator | None = None) -> None:
         """`config` with `sim` (default: built now) from its initial state."""
-        self.sim = build_simulator(config, SPECS) if sim is None else sim
+        self.sim = build_simulator(config, config.given or ("scene",)) if sim is None else sim
         self.config = config
         for event in self.sim.events:     # e.g. sub-stepping chosen while it was built
             self.log.info(event.message)
@@ -66,6 +68,8 @@ class ArmSimCore(CommandInput):
         self._last_tick_wall = None
         self.interval = Interval(self.wall_clock(), self.sim.time, self.refused_commands,
                                  self.late_ticks)
+        if config.values["lockstep"]:     # the state the first command answers
+            self.lockstep.queue(self.joint_state())
 
     def _on_sim_event(self, event) -> None:
         """Said at the event's level as it happens (a fault: _advance), warnings rate-limited."""
@@ -93,6 +97,8 @@ class ArmSimCore(CommandInput):
             self._change_physics(config, [n for n in changed if n in LIVE])
         if any(n.startswith("rerun_") for n in changed):
             self.recorder = self.recorder.reopen(config)
+        if "lockstep" in changed and config.values["lockstep"] and not restart:
+            self.lockstep.queue(self.joint_state())      # switched on: answer this state
         return changed
 
     def _event(self, text: str) -> None:
@@ -120,28 +126,23 @@ class ArmSimCore(CommandInput):
     def tick(self, wall_now: float | None = None,
              clock_listened: bool = False) -> JointStateData | None:
         """One timer tick: steps_per_tick RK4 steps, then the JointState to publish. In
-        lockstep each command ticks instead (lockstep_states holds their JointStates until
-        the transport publishes them): None, unless a node listens on /clock
+        lockstep the answers tick (callbacks.py): None, unless a node listens on /clock
         (`clock_listened`: a use_sim_time peer, which may wait for the clock to move before
-        it commands) and no tick came for lockstep_wait. Paused: the held state, time
-        standing still."""
-        if self.paused:
-            return self.joint_state()
-        if not self.config.values["lockstep"]:
-            return self._tick(wall_now)
+        it commands) and no tick came for lockstep_wait. Paused: the held state."""
+        if self.paused or not self.config.values["lockstep"]:   # lockstep: each state once
+            return (None if self.config.values["lockstep"] else self.joint_state()) \
+                if self.paused else self._tick(wall_now)
         wait = self.config.values["lockstep_wait"] if clock_listened else 0.0
         now = self.wall_clock() if wall_now is None else wall_now
         last = self._last_tick_wall
-        return self._tick(now) if wait and (last is None or now - last >= wait) else None
+        return self.lockstep.latest(self._tick(now)) if wait and (
+            last is None or now - last >= wait) else None
 
     def step_tick(self) -> JointStateData:
-        """A tick now, whatever the schedule (StepSimulation); its JointState."""
+        """A tick now (StepSimulation; in lockstep once answered: SimulationControl.ready)."""
         self._last_tick_wall = None       # asked for: not late
-        return self._tick()
-
-    def take_lockstep_states(self) -> list:
-        states, self.lockstep_states = self.lockstep_states, []
-        return states
+        data = self._tick()
+        return self.lockstep.latest(data) if self.config.values["lockstep"] else data
 
     def _tick(self, wall_now: float | None = None) -> JointStateData:
         self._note_lateness(self.wall_clock() if wall_now is None else wall_now)
@@ -151,6 +152,8 @@ class ArmSimCore(CommandInput):
                 servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
+        if self.interval.waiting:         # the status's pace counts from the first tick done
+            self.first_tick_done()
         return self.joint_state()
 
     def _note_lateness(self, wall_now: float) -> None:
@@ -206,37 +209,34 @@ class ArmSimCore(CommandInput):
         self._event(why)
 
     def finish(self) -> None:
-        self.recorder.finish()
+        self.log.info(self.stop_line(self.recorder.finish()))    # the recording closed first
 
     def real_time_factor(self, wall_now: float) -> float:
         return self.interval.real_time_factor(wall_now, self.sim.time)
 
     def diagnostics(self, wall_now: float | None = None) -> DiagnosticData:
-        """The 1 Hz status: refused commands, real-time factor, energy residual, late ticks,
-        sub-steps and refused steps. Rates are over the interval since the previous call."""
+        """The 1 Hz status (diagnostics.py); rates over the interval since the previous call."""
         wall_now = self.wall_clock() if wall_now is None else wall_now
         rtf, new_refused, new_late = self.interval.close(wall_now, self.sim.time,
                                                          self.refused_commands, self.late_ticks)
         level, message = health(self.held, new_refused, new_late, self.sim.books_fault)
         values = diagnostic_values(self.sim, f"{rtf:.3f}", self.max_abs_residual, self.held,
                                    self.command, self.config.steps_per_tick,
-                                   {name: getattr(self, name) for name in COUNTERS})
+                                   {name: getattr(self, name) for name in COUNTERS},
+                                   self.commands.last_refusal)
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
 
-    def status_line(self, rtf: float) -> str:
-        """The one-line status the node prints each second."""
-        return status_line(self.sim, self.held, rtf, self.refused_commands)
 
-
-def started(config: NodeConfig) -> str:
-    """The start line: the recording's file, if any (scripts/run names a new one each run);
-    with a robot_description, every scene value the URDF replaced."""
+def started(config: NodeConfig, recording: bool = True) -> str:
+    """The start line: the scene, its step and method, and what is on (status.what_is_on:
+    the estimate, sensors and where the truth goes, command latency, lockstep, the recording,
+    named only where `recording` is under way; scripts/run names a new file each run); with a
+    robot_description, every scene value the URDF replaced."""
     scene, values = config.scene, config.values
     text = (f"scene {scene.name} started: policy {scene.policy}, h = {scene.step_size:g} s, "
-            f"{config.steps_per_tick} steps per tick")
-    if values["rerun_path"]:
-        text += f"; recording {values['rerun_path']}"
+            f"{scene.method}, {config.steps_per_tick} steps per tick; "
+            + "; ".join(what_is_on(scene, values, recording)))
     if values["robot_description"]:
         base = load_scene(values["scene"])
         changed = changed_values(base, read_urdf(values["robot_description"]).scene(base))

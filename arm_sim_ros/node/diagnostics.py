@@ -30,13 +30,16 @@ class DiagnosticData:
     values: list           # [(key, value text)]
 
 
-COUNTERS = ("received_commands", "refused_commands", "late_ticks", "command_timeouts")
+COUNTERS = ("received_commands", "refused_commands", "stale_commands", "late_ticks",
+            "command_timeouts")
 
 
 def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held: bool,
-                      command, steps_per_tick: int, counters=None) -> list:
+                      command, steps_per_tick: int, counters=None,
+                      last_refusal: str = "none") -> list:
     """The (key, text) pairs of the simulation's DiagnosticStatus: the node's, and those an
-    offline `arm-sim run --bag` writes (its counters stay 0)."""
+    offline `arm-sim run --bag` writes (its counters stay 0). `last_refusal`: why the latest
+    refused command was refused, so that its sender can say so (arm-sim send-torque)."""
     counters = counters or {}
     return [
         ("scene", sim.scene.name), ("policy", sim.scene.policy),
@@ -44,6 +47,7 @@ def diagnostic_values(sim, real_time_factor: str, max_abs_residual: float, held:
         ("energy_residual", "held" if held else f"{sim.residual():.3e}"),
         ("max_abs_energy_residual", f"{max_abs_residual:.3e}"),
         *((name, str(counters.get(name, 0))) for name in COUNTERS),
+        ("last_refusal", last_refusal),
         ("command", f"{command[0]:g} {command[1]:g}"),
         ("steps_per_tick", str(steps_per_tick)),
         # What the stability guard did: sub-steps per step (1 = plain steps) and refusals.

@@ -5,21 +5,23 @@
 
 On the dds transport the `--ros-args` are read here and resolved as rclcpp/rclpy resolve them:
 every `/**` assignment (a parameter file's `/**:` section or a `-p`) in command-line order, then
-the node's own sections (`arm_sim:` or `/arm_sim:`), which therefore win. Prints a one-line
-status each second.
+the node's own sections (`arm_sim:` or `/arm_sim:`), which therefore win. Says at start what
+is on, prints a one-line status each second, and says at the end where it stopped and what it
+wrote (--quiet: warnings and errors only).
 """
 from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import time
 
 from . import transports
 from ..interface import NODE_NAME
+from ..physics.compiled.cache import log_pulse
 from ..physics.scene import MAX_DURATION
 from ..usage import DONE, REFUSED, ArgumentParser, UsageError, exit_as_main, one_line
+from .stop import Stop, stopped_while_starting
 from .params.parameters import PARAMETERS, when_changed
 from .params.values import ParameterRefused
 from .params.ros_args import (LOG_LEVELS, load_params_file, node_identity,
@@ -51,33 +53,27 @@ class _RosFormatter(logging.Formatter):
         return f"[{level}] [{record.created:.9f}] [{record.name}]: {record.getMessage()}"
 
 
-class Stop:
-    """SIGINT and SIGTERM: KeyboardInterrupt where Python is, and remembered, because one
-    raised inside a C library's callback into Python is printed and dropped there (llvmlite's,
-    while numba compiles a scene's code at the first tick: the node ran on). The dds loop
-    reads `requested` every pass."""
-
-    requested = False
-
-    def __call__(self, number, frame):
-        self.requested = True
-        raise KeyboardInterrupt
-
-
-def run_dds(ros_argv: list, duration: float | None, status, stop=None) -> int:
+def run_dds(ros_argv: list, duration: float | None, status, stop=None, quiet=False) -> int:
     from .wire.messages import close_domains
     from .transports.dds import DdsArmSimNode
 
     ros = parse_ros_args(ros_argv)
-    configure_logging(ros["level"])
+    configure_logging(ros["level"] or ("warn" if quiet else None))
     name, namespace, rules = node_identity(ros["remap"], NODE_NAME)
     node = DdsArmSimNode(node_parameters(ros, name, namespace), name=name, namespace=namespace,
                          remap=rules)   # a DiscoveryError is a UsageError: one line, exit 2
+    early = stop is not None and stop.requested     # a stop while it started: now, whole
+    if stop is not None:
+        stop.starting = False
     try:
         node.spin(duration, status, stopped=stop and (lambda: stop.requested))
     finally:
+        path = node.core.config.values["rerun_path"]
         node.close()
         close_domains()      # Cyclone torn down now, in order, not by interpreter teardown
+        if early:
+            print(stopped_while_starting(stop, f"its recording {path} holds its start" if path
+                                         else "no recording was asked for"), file=sys.stderr)
     return 0
 
 
@@ -116,19 +112,21 @@ def build_parser() -> argparse.ArgumentParser:
                         help="rclpy when it imports (auto), else dds")
     parser.add_argument("--duration", type=float, metavar="SECONDS",
                         help="stop after this much simulated time (default: run until Ctrl-C)")
-    parser.add_argument("--quiet", action="store_true", help="no status line each second")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no status line each second and no info lines: warnings and "
+                             "errors only (as --ros-args --log-level warn)")
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv=None, stop: Stop | None = None) -> int:
+    """The node; `stop`: the signals' handler, installed already by the console script
+    (entry.py) before the node's modules were imported."""
     argv = sys.argv[1:] if argv is None else list(argv)
     ours, ros_argv = split_ros_args(argv)
-    # launch stops nodes with SIGINT, then SIGTERM: both end the loop the same clean way.
-    # SIGINT too, explicitly: Python leaves it ignored when the parent started us with it
-    # ignored (`nohup`, `cmd &` in a script), and then Ctrl-C could never stop the node.
-    stop = Stop()
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, stop)
+    if stop is None:
+        stop = Stop()
+        stop.starting = True
+        stop.install()
     try:
         args = parse_ours(ours)
         if args.duration is not None and not 0 <= args.duration <= MAX_DURATION:
@@ -136,14 +134,21 @@ def main(argv=None) -> int:
                              f"to {MAX_DURATION:g}")
         transport = transports.choose(args.transport)
         status = None if args.quiet else _print_status
+        log_pulse()          # a first compile at the first tick: "still compiling" each 10 s
         if transport == "rclpy":
+            if stop.requested:            # rclpy.init takes the signals over: said now
+                print(stopped_while_starting(stop, "no recording was written"), file=sys.stderr)
+                return DONE
             from .transports.rclpy_transport import run
-            return run(["arm_sim_node", "--ros-args", *ros_argv], args.duration, status)
-        return run_dds(ros_argv, args.duration, status, stop)
+            quiet = ["--log-level", "warn"] if args.quiet else []     # a later one wins
+            return run(["arm_sim_node", "--ros-args", *quiet, *ros_argv], args.duration, status)
+        return run_dds(ros_argv, args.duration, status, stop, args.quiet)
     except (UsageError, ParameterRefused, transports.TransportUnavailable) as error:
         print(f"arm_sim_node: error: {one_line(error)}", file=sys.stderr)
         return REFUSED
     except KeyboardInterrupt:
+        if stop.starting:                 # a second signal while it started: it did not wait
+            print(stopped_while_starting(stop, "no recording was finished"), file=sys.stderr)
         return DONE
     except Exception:
         # A signal met inside numba's first compile is dropped in llvmlite's callback and

@@ -135,6 +135,18 @@ class RecorderLink:
         if ticks and states:
             self.call("node_ticks", self.sim, ticks)
 
-    def finish(self) -> None:
+    def idle(self) -> None:
+        """Nothing is stepping (lockstep waiting for its answer): what is kept goes to the
+        recorder, and out to its file when a send is due, as the steps would send it (a
+        test reads the recording of a run that stopped while the node goes on)."""
+        self.hand_over()
+        if self.recorder is not None and hasattr(self.recorder, "flush"):
+            self.call("flush", self.sim)
+
+    def finish(self) -> bool:
+        """The recording finished; True when it was written whole (a recorder that failed
+        on the way, or none, is not)."""
+        alive = self.recorder is not None
         self.call("finish", self.sim)
-        self.recorder = None
+        written, self.recorder = alive and self.recorder is not None, None
+        return written

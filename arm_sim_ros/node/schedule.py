@@ -1,4 +1,5 @@
-"""When the next tick is due: publish_rate x real_time_factor ticks per wall second.
+"""When the next tick is due: publish_rate x real_time_factor ticks per wall second, or, in
+lockstep, when the command that answers the latest state has come (Lockstep).
 
 Both transports pace their ticks with it. A late tick is counted by the core; the ticks
 then follow back to back until the schedule is met again, unless it is more than CATCH_UP
@@ -40,8 +41,60 @@ class TickSchedule:
             self.next_tick = now
 
 
-# Wall seconds from the JointState of a tick a command made (lockstep) to its /clock: a
-# use_sim_time controller (controller_manager) wakes on /clock and reads the latest JointState
-# its hardware has taken, in another thread; written together, it often had not yet taken
-# this one and acted on the state a tick older.
-STATE_BEFORE_CLOCK = 0.001
+class Lockstep:
+    """Which command answers which state, in lockstep: a closed loop ordered by its messages,
+    not by the wall clock.
+
+    Every state the node publishes in lockstep awaits the command that answers it, and a tick
+    happens when, and only when, that command has arrived (and the simulation may move: a
+    paused node holds the answer until it plays or is stepped). A command names the state it
+    answers by carrying its stamp (a JointState command's header.stamp, copied from the
+    joint_states message it answers); it then answers the latest state, or an earlier one
+    (stale: a second answer to a state already answered, neither taken nor ticked). A command
+    with no stamp (Float64MultiArray; a JointState stamped 0, or by a clock the node's stamps
+    never showed, as ros2_control's hardware interface stamps its own) answers the latest
+    state on arrival."""
+
+    RESEND = 1.0                    # wall s: an unanswered state goes out again (delivery)
+
+    def __init__(self):
+        self.published = None       # the stamp of the latest state published in lockstep
+        self.sent = (0, -float("inf"))   # (matched readers, wall time) when it last went out
+        self.answered = False       # its answer has come, the tick has not yet happened
+        self.stale = 0              # answers to states answered already
+        self.states = []            # states of lockstep ticks the transport has not published
+
+    def answers(self, stamp_ns: int | None, origin_ns: int) -> bool:
+        """Whether a command stamped `stamp_ns` answers the latest state (else: stale)."""
+        latest = self.published
+        return not stamp_ns or latest is None or stamp_ns >= latest or stamp_ns < origin_ns
+
+    def latest(self, data):
+        """`data` (a JointStateData) is the latest state, published once: it awaits its
+        answer."""
+        self.published, self.answered = data.stamp_ns, False
+        self.sent = (self.sent[0], float("inf"))      # just went out: RESEND from the next look
+        return data
+
+    def resend(self, readers: int, now: float) -> bool:
+        """Whether the latest state, unanswered, goes out again now: to a reader that has
+        matched since (the first moment it can reach it), or RESEND after it last went out
+        (a reader that had matched by count before it could take it). It only repeats a
+        state: an answer to the copy after the first is stale, so nothing is reordered."""
+        count, when = self.sent
+        when = now if when == float("inf") else when     # published since: from this look
+        due = self.published is not None and not self.answered and (
+            readers > count or now - when >= self.RESEND)
+        self.sent = (readers, now if due else when)
+        return due
+
+    def queue(self, data) -> None:
+        """The latest state, for the transport to publish (take)."""
+        self.states.append(self.latest(data))
+
+    def take(self) -> list:
+        """The states not yet published, in order."""
+        states, self.states = self.states, []
+        return states
+
+

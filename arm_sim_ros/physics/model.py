@@ -7,7 +7,7 @@ links horizontal. Plain floats: a 2-DOF arm is far cheaper without numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from math import cos, isfinite, pi, radians, sin
+from math import cos, isfinite, pi, sin
 
 PAIR_FIELDS = ("link_lengths", "link_masses", "com_distances", "com_inertias")
 MAX_ANGLE = 1e6   # rad: beyond it sin and cos keep no digit of an angle; nothing physical goes there
@@ -139,9 +139,10 @@ def angle_warning(initial_positions, node: bool = False) -> str | None:
     beyond = [q for q in initial_positions if abs(q) > 2 * pi]
     if not beyond:
         return None
-    if node:   # ROS 2 parameters are plain doubles: give the radians
-        meant = "-p initial_positions:=[" + ", ".join(
-            f"{radians(q):.6g}" for q in initial_positions) + "]"
+    if node:   # a ROS 2 list holds one type: deg on every number
+        meant = '-p "initial_positions:=[' + ", ".join(
+            f"{q:g}deg" for q in initial_positions) + ']"'
+
     else:
         meant = "initial_positions=" + ",".join(f"{q:g}deg" for q in initial_positions)
     return (f"initial_positions {list(initial_positions)} rad: {beyond[0]:g} rad is more "

@@ -9,7 +9,7 @@ import os
 import sys
 from dataclasses import dataclass, fields, replace as dataclass_replace
 from functools import cached_property
-from math import inf, isfinite, radians
+from math import inf, isfinite
 from pathlib import Path
 
 from .. import yaml_files
@@ -18,15 +18,12 @@ from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEP
 from .trust.unestimated import ESTIMATES
 from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
                       JointLimits, Motors, scene_effects, validate)
-from . import sensing
+from . import angles, sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .stepping.stability import UNNAMED, unstiff_method
 from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
 
 
-# Angles the command line also takes in degrees, written `90deg` (`--set initial_positions=90deg,0`).
-ANGLE_KEYS = ("initial_positions", "springs.rest_positions", "joint_limits.lower",
-              "joint_limits.upper")
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
 # Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
@@ -73,6 +70,9 @@ class Scene:
     # what a run computes of its own error (trust/unestimated.py): global (the shadow and
     # its checks) or off (the steps alone: no error estimate, so tolerance 0)
     estimate: str = "global"
+    # on: a step beyond the method's stability limit is split into sub-steps (stability.py);
+    # off: every step taken whole, as a stability study needs to find where it diverges
+    stability_plan: str = "on"
     step_size: float = 0.01
     duration: float = 0.5
 
@@ -111,6 +111,10 @@ class Scene:
             raise SceneError(f"estimate off computes no error estimate, so it cannot hold "
                              f"tolerance = {self.tolerance:g}: set tolerance 0, or leave it "
                              "out (estimate off alone sets it to 0)")
+        if self.stability_plan not in ("on", "off"):
+            raise SceneError(f"stability_plan {self.stability_plan!r} is unknown; choose on "
+                             "(sub-steps where a step would be unstable, the default) or off "
+                             "(every step whole: a stability study)")
         if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
             raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
@@ -241,6 +245,7 @@ def coerce_value(name: str, kind: str, value):
     """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
     "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
     its own numbers, text and pairs."""
+    value = in_radians(name, value)
     if kind == "float_or_pair":
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
             return coerce_value(name, "float", value)
@@ -251,6 +256,8 @@ def coerce_value(name: str, kind: str, value):
     if kind == "effect":
         if value is None:
             return None
+        if isinstance(value, dict):
+            value = {k: in_radians(f"{name}.{k}", v) for k, v in value.items()}
         try:
             values = validate(name, MAPPINGS[name].parameters, value)
             if name in BUILT:
@@ -327,13 +334,14 @@ def parse_value(key: str, text: str):
 
 
 def _number(key: str, text: str) -> float:
-    """A number; an angle may be given in degrees as `90deg`."""
+    """A number; an angle may be given in degrees as `90deg` (angles.py)."""
     text = text.strip()
-    if text.endswith("deg"):
-        if key not in ANGLE_KEYS:
-            raise SceneError(f"{key}={text!r}: only angles take deg ({', '.join(ANGLE_KEYS)})")
-        return radians(float(text[:-3]))
-    return float(text)
+    return angles.degrees(key, text, SceneError) if text.endswith("deg") else float(text)
+
+
+def in_radians(key: str, value):
+    """`value` with its numbers in degrees in radians (angles.py's rule), or SceneError."""
+    return angles.in_radians(key, value, parse_value, SceneError)
 
 
 def scene_dirs() -> list[Path]:
@@ -359,7 +367,7 @@ def load_scene(name: str = "release") -> Scene:
     directory in it); the preset directories are searched in scene_dirs() order."""
     if name.endswith((".yaml", ".yml")) or os.sep in name:
         path = Path(name)
-        if not _is_file(path):
+        if not _is_file(path, Path.exists):     # a directory: yaml_files says so
             raise SceneError(f"scene file {name} does not exist")
         return scene_from_file(path, path.stem)
     for directory in scene_dirs():
@@ -371,9 +379,9 @@ def load_scene(name: str = "release") -> Scene:
                      f"{', '.join(names) or 'none found'} (or give a path to a .yaml file)")
 
 
-def _is_file(path: Path) -> bool:
+def _is_file(path: Path, test=Path.is_file) -> bool:
     try:
-        return path.is_file()
+        return test(path)
     except (OSError, ValueError):          # a name too long, a NUL byte in it
         return False
 
@@ -385,6 +393,9 @@ def scene_from_file(path: Path, name: str) -> Scene:
         raise SceneError(str(error)) from None
     if not isinstance(data := {} if data is None else data, dict):
         raise SceneError(f"scene file {path} must hold a mapping of keys to values")
+    if data and not set(data) & set(FIELD_KINDS):     # /etc/shadow: its lines never echoed
+        raise SceneError(f"{path} is not a scene file: not one of its keys is a scene key "
+                         "(`arm-sim scenes` lists the presets)")
     try:
         return Scene(name=name).replace(**data)
     except SceneError as error:

@@ -54,7 +54,8 @@ class Simulator:
         self._rhs = self.dynamics.function
         self._inputs, self._losses = book_entries(self.dynamics)
         self.stability_ratio, self.stability_limit, self.substeps, message = stability.plan(
-            self._tableau, self.dynamics.active, self.arm, self.step_size)
+            self._tableau, self.dynamics.active, self.arm, self.step_size,
+            whole=scene.stability_plan == "off")
         if message:
             self._emit("substepping", message)
         self._driver = self.dynamics.driver_check()    # None without a voltage limit
@@ -249,9 +250,13 @@ def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> Non
     sim.dynamics.given[0] = tau1      # under a control loop: its input (sensing/loop.py)
     sim.dynamics.given[1] = tau2
     servo.set_points(sim.dynamics, setpoints or {})
-    if commanded(sim) != before and not (sim.kernel is not None and sim.kernel.commanded(sim)):
+    changed, answered = commanded(sim) != before, tuple(sim.dynamics.given) != torque
+    if not (changed or answered) or (sim.kernel is not None and
+                                     sim.kernel.commanded(sim, answered)):
+        return                        # the kernel's arrays took it: no books to settle
+    if changed:
         sim.accuracy.due = min(sim.accuracy.due, sim.steps)
-    if tuple(sim.dynamics.given) != torque and sim.accuracy.shadow is not None:
+    if answered and sim.accuracy.shadow is not None:
         sim.accuracy.shadow.answered()        # a controller's answer (shadow.py)
 
 

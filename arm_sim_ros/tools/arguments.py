@@ -57,11 +57,24 @@ def read_urdf_file(path: str) -> str:
         raise SceneError(f"--urdf {path}: cannot read it ({reason})") from None
 
 
-def add_scene_arguments(parser) -> None:
-    parser.add_argument("--scene", default="release", help="preset name (see `arm-sim scenes`) or a scene .yaml file")
+def add_scene_arguments(parser, stepping: bool = True, scene_option: bool = True) -> None:
+    """--scene (unless the command takes the scene as its first argument), --urdf and --set;
+    with `stepping` (a command that integrates) --step, --tolerance and --max-substeps too."""
+    if scene_option:
+        parser.add_argument("--scene", default="release",
+                            help="preset name (see `arm-sim scenes`) or a scene .yaml file")
     parser.add_argument("--urdf", metavar="FILE",
                         help="take the arm from a planar 2R URDF: links, inertias, joint and "
-                             "effort limits, damping, friction; --scene gives the rest")
+                             "effort limits, damping, friction; the scene gives the rest")
+    if stepping:
+        add_stepping_arguments(parser)
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scene key, e.g. gravity=0, constant_torque=1,0 or "
+                             "springs.stiffness=20,5; an angle (a key in rad) may be written "
+                             "in degrees, 90deg")
+
+
+def add_stepping_arguments(parser) -> None:
     parser.add_argument("--step", help="RK step size h in seconds (default: the scene's)")
     parser.add_argument("--tolerance", metavar="TOL",
                         help="local error per simulated second a step may make before it is "
@@ -69,6 +82,3 @@ def add_scene_arguments(parser) -> None:
     parser.add_argument("--max-substeps", dest="max_substeps", metavar="N",
                         help="the most sub-steps the tolerance may ask of one step "
                              "(default: the scene's, 1000)")
-    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="override a scene key, e.g. gravity=0, constant_torque=1,0 or "
-                             "springs.stiffness=20,5")

@@ -52,8 +52,8 @@ def cmd_batch(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("batch", help="simulate many arms at once (numpy RK4) and report "
-                                            "throughput")
+    p = subparsers.add_parser("batch", help="simulate many arms at once (one compiled call; "
+                                            "numpy without numba) and report throughput")
     add_scene_arguments(p)
     p.add_argument("--count", type=int, default=100_000, help="number of arms (default 100000)")
     p.add_argument("--duration", type=float, default=0.5, help="simulated seconds (default 0.5)")

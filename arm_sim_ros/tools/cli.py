@@ -12,7 +12,6 @@ import os
 import sys
 import time
 
-from ..physics.compiled import cache as compile_cache
 from ..physics.model import ParameterError
 from ..physics.scene import Scene, SceneError, load_scene, parse_value, preset_names
 from ..physics.trust.unestimated import ESTIMATES
@@ -23,7 +22,7 @@ from ..usage import (BROKEN_PIPE, DONE, FAULT, REFUSED, STOPPED, ArgumentParser,
                      exit_as_main, one_line)
 from .arguments import add_scene_arguments, scene_from_args
 from .run.rows import ChunkSteps
-from .progress import Progress
+from .progress import Progress, watch_compiles
 from .signals import StopOnSignals
 
 # Modules that contribute subcommands of their own (each defines add_parser).
@@ -34,6 +33,7 @@ SUBCOMMAND_MODULES = ["arm_sim_ros.tools.accuracy.command",     # accuracy
                       "arm_sim_ros.tools.urdf",         # urdf
                       "arm_sim_ros.tools.fit.command",          # fit
                       "arm_sim_ros.tools.fit.excitation",  # excite
+                      "arm_sim_ros.tools.sweep.command",   # sweep
                       "arm_sim_ros.tools.wire.send_torque"]  # send-torque
 
 def cmd_scenes(args) -> int:
@@ -225,9 +225,7 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv=None) -> int:
-    if sys.stderr.isatty() and not compile_cache.listeners:   # a person waits: say a compile
-        compile_cache.listeners.append(lambda line: print(f"arm-sim: {line}", file=sys.stderr,
-                                                          flush=True))
+    watch_compiles("arm-sim")   # a first compile says so, on a terminal, a file or a pipe
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)

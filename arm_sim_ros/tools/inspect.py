@@ -86,7 +86,11 @@ def scene_source(name: str) -> str:
     text, _ = build.module_source(dynamics, step)
     runs = ("the compiled path" if build.compilable(dynamics, step) else
             "Python's path (numba off or absent, or a servo's set-points)")
-    header = [f"# {build.module_name(text)}.py in {build.cache_dir()}",
+    module = f"{build.module_name(text)}.py"
+    cached = (build.cache_dir() / module).is_file()
+    header = [f"# {module}: " + (f"in the kernel cache {build.cache_dir()}" if cached else
+                                 f"not compiled yet; its first compiled run writes it into "
+                                 f"the kernel cache {build.cache_dir()}"),
               f"# scene {scene.name}: {scene.method}, effects "
               f"{', '.join(e.name for e in dynamics.active) or 'none'}; runs on {runs}"]
     return "\n".join(header) + "\n" + text

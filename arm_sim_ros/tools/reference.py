@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import sys
 from dataclasses import MISSING, fields
 
@@ -20,6 +21,7 @@ from .control.follower import build_parser as controllers_parser
 from ..node.params.parameters import PARAMETERS, SPECS, scene_defaults, when_changed
 from ..physics.effects import EffortLimits
 from ..physics.effects.base import CHECKS, REQUIRED
+from ..physics.angles import ANGLE_KEYS
 from ..physics.scene import FIELD_KINDS, MAPPINGS, Scene, load_scene, preset_names
 from ..usage import EXIT_CODES
 
@@ -33,6 +35,9 @@ OFFLINE_ONLY = {
                 "or rad/s for a velocity servo)",
     "duration": "simulated seconds `arm-sim run` runs (a whole number of steps); the node "
                 "runs until stopped (`--duration`)",
+    "stability_plan": "on: a step beyond the integrator's stability limit is taken as "
+                      "sub-steps (the node always plans); off: every step whole, so a run may "
+                      "diverge there (a stability study: `arm-sim sweep`)",
 }
 KINDS = {"pair": "[a, b]", "float": "number", "str": "text", "float_or_pair": "number or [a, b]",
          "pair_or_none": "[a, b]", "effect": "mapping", "names": "[name, name]",
@@ -80,11 +85,21 @@ def effect_keys(effect: str, parameters) -> list:
     return rows
 
 
+def degrees_rule() -> str:
+    """The one rule for angles in degrees, stated where the keys are listed."""
+    return ("**Angles in degrees.** Every key in rad (" +
+            ", ".join(f"`{key}`" for key in ANGLE_KEYS) + ") also takes degrees, written "
+            "`90deg`: in a scene file (`initial_positions: [90deg, 0]`), in `--set` "
+            "(`initial_positions=90deg,0`) and as a node parameter (`-p "
+            "\"initial_positions:=[90deg, 0deg]\"`: a ROS 2 list holds one type, so every "
+            "number takes `deg`). Every other key refuses `deg`, naming these.\n\n")
+
+
 def scenes_page() -> str:
     out = [HEADER, "# Scene keys and presets\n\n",
            "Every key a scene file, `arm-sim run --set KEY=VALUE` and the node's parameters "
            "take. Pairs are per joint, `[joint 1, joint 2]`; an effect a scene does not name is "
-           "absent and costs nothing.\n\n", "## The scene\n\n",
+           "absent and costs nothing.\n\n", degrees_rule(), "## The scene\n\n",
            _table(("key", "kind", "default", "meaning"), scene_keys())]
     effects = {"effort_limits": (EffortLimits, (EffortLimits.parameter,)),
                **{name: (kind, kind.parameters) for name, kind in MAPPINGS.items()}}
@@ -123,6 +138,7 @@ def node_page() -> str:
            "`~/` under its own name. Both transports serve the same.\n\n",
            "## Parameters\n\n", "Defaults derived from the scene are those of scene "
            "`release`; the fourth column says what setting one while the node runs does.\n\n",
+           degrees_rule(),
            _table(("parameter", "ROS type", "default", "changes", "meaning"), rows),
            "## Publishes\n\n", _table(("topic", "type", "what"), endpoints(interface.PUBLISHES)),
            "## Subscribes\n\n", _table(("topic", "type", "what"), endpoints(interface.SUBSCRIBES)),
@@ -179,3 +195,31 @@ def _columns(width: str):
             del os.environ["COLUMNS"]
         else:
             os.environ["COLUMNS"] = before
+
+
+# Parts of the guides made the same way: a page's text between `<!-- generated: NAME -->` and
+# `<!-- end generated -->` is what the maker of NAME returns (scripts/reference writes it;
+# test/project/test_reference.py fails when it differs).
+REGION = re.compile(r"(?P<open><!-- generated: (?P<name>[\w/.-]+) -->\n)(?P<body>.*?)"
+                    r"(?P<close><!-- end generated -->)", re.S)
+
+
+def preset_list() -> str:
+    """The presets a guide lists: every one in config/scenes/, with its own description."""
+    return _table(("preset", "what it shows"),
+                  [(f"`{name}`" + (" (default)" if name == "release" else ""),
+                    load_scene(name).description) for name in preset_names()])
+
+
+GUIDE_REGIONS = {"presets": preset_list}
+
+
+def fill_regions(text: str, makers: dict) -> str:
+    """`text` with every generated region made anew; a region no maker knows is an error."""
+    def made(match):
+        name = match["name"]
+        if name not in makers:
+            raise KeyError(f"no maker for the generated region {name!r} "
+                           f"(known: {', '.join(sorted(makers))})")
+        return f"{match['open']}\n{makers[name]().strip()}\n\n{match['close']}"
+    return REGION.sub(made, text)

@@ -25,7 +25,7 @@ def cmd_urdf(args) -> int:
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("urdf", help="print the URDF of a scene's arm (for "
                                            "robot_state_publisher and RViz)")
-    add_scene_arguments(p)
+    add_scene_arguments(p, stepping=False)      # the arm only: no step, no tolerance
     p.add_argument("-o", "--output", metavar="PATH", help="write the URDF to PATH")
     p.add_argument("--force", action="store_true", help="replace an existing -o file")
     p.add_argument("--robot", default="two_link_arm", help="the <robot> name")

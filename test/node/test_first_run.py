@@ -6,6 +6,7 @@ steps too coarse for it."""
 import pytest
 
 from tools.test_no_surprises import ListLog
+from tools.test_run_endings import Clock
 from arm_sim_ros.node.core import ArmSimCore
 from arm_sim_ros.node.params.parameters import resolve_parameters
 from arm_sim_ros.physics.scene import load_scene
@@ -68,3 +69,90 @@ def test_each_kind_of_event_has_one_level_for_every_listener():
         "substepping": "warning", "accuracy": "warning", "saturation": "warning",
         "servo": "warning", "books": "error", "fault": "error"}
     assert set(LEVELS.values()) == {"info", "error"}
+
+
+# --- what the console says: at start what is on, each second the pace, at the end what was done
+
+def started_line(log):
+    return next(m for kind, m in log.lines if kind == "info" and " started: " in m)
+
+
+def test_the_start_line_of_the_default_scene_names_its_method_and_estimate():
+    _, log = run_node(0.1)
+    assert started_line(log) == ("scene release started: policy command, h = 0.01 s, rk4, "
+                                 "1 steps per tick; estimate global, tolerance 5e-05")
+
+
+def test_the_start_line_says_what_is_on_and_where_the_truth_goes(tmp_path):
+    """With sensors, command_delay, estimate off or lockstep on, the line was the same as
+    without: nothing said the readings were no longer the truth."""
+    recording = tmp_path / "arm.rrd"
+    _, log = run_node(0.1, scene="servo_hold", estimate="off", command_delay=0.002,
+                      lockstep=True, rerun_path=str(recording),
+                      **{"sensors.position_resolution": [0.006, 0.006],
+                         "sensors.velocity": "differences"})
+    assert started_line(log) == (
+        "scene servo_hold started: policy command_gravity_compensation, h = 0.001 s, rk4, "
+        "10 steps per tick; estimate off: no error estimate; sensors (position_resolution "
+        "[0.006, 0.006], velocity differences): joint_states carries the readings, "
+        "~/true_joint_states the truth; command_delay 0.002 s; lockstep: one tick per "
+        f"command, or after 0.1 s without one while a node listens on /clock; recording {recording}")
+
+
+def test_a_recording_that_could_not_start_is_not_named_as_one(tmp_path, monkeypatch):
+    """rerun-sdk absent (the colcon venv beside ROS's numpy): the error line, then a start line
+    that said "recording arm.rrd" all the same."""
+    from arm_sim_ros.node import core as node_core
+
+    def no_rerun(config, log):
+        log.error("Rerun telemetry is off: No module named 'rerun'")
+    monkeypatch.setattr(node_core, "make_recorder", no_rerun)
+    _, log = run_node(0.05, rerun_path=str(tmp_path / "arm.rrd"))
+    assert started_line(log).endswith("; Rerun telemetry off (see the error above)")
+    assert "arm.rrd" not in started_line(log)
+    assert said(log, "info")[-1].endswith("; no recording; 0 commands refused, 0 late ticks")
+
+
+def test_the_status_pace_starts_at_the_first_tick_and_the_stop_line_sums_the_run(tmp_path):
+    """A first tick that took 3 s (a compile) read "real-time factor 0.00" in the first status
+    line; then a duplicate last status line read 0.00 or 1.42. Now the pace counts from the
+    first tick done, and the run ends with one line: where, at what pace, what was written."""
+    wall, log = Clock(), ListLog()
+    wall.now = 100.0
+    recording = tmp_path / "arm.rrd"
+    core = ArmSimCore(resolve_parameters({"rerun_path": str(recording)}), log, wall_clock=wall)
+    assert "real-time factor      -   energy" in core.status_line(0.0)   # no tick yet
+    wall.now += 3.0                         # the first tick's compile
+    core.tick(wall.now)
+    for _ in range(99):                     # then 99 ticks of 10 ms in real time
+        wall.now += 0.01
+        core.tick(wall.now)
+    rtf = core.real_time_factor(wall.now)
+    assert abs(rtf - 1.0) < 1e-9
+    assert "real-time factor   1.00   energy" in core.status_line(rtf)
+    core.on_command([float("nan"), 0.0])    # refused
+    wall.now += 0.5
+    core.finish()
+    assert said(log, "info")[-1] == (
+        f"stopped at t = 1.000 s, 0.990 s simulated in 1.49 s since the first tick "
+        f"(real-time factor 0.66); wrote {recording}; 1 commands refused, 0 late ticks")
+    assert recording.stat().st_size > 0
+
+
+def test_quiet_prints_no_info_line_and_the_run_ends_with_its_stop_line():
+    import os
+    import subprocess
+    import sys
+
+    env = os.environ | {"ROS_DOMAIN_ID": "209", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    command = [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds",
+               "--duration", "0.3", "--ros-args", "-p", "real_time_factor:=0.0"]
+    quiet = subprocess.run(command[:7] + ["--quiet"] + command[7:], env=env,
+                           capture_output=True, text=True, timeout=120)
+    assert quiet.returncode == 0 and quiet.stdout == "" and quiet.stderr == "", quiet.stderr
+    loud = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
+    lines = loud.stderr.strip().splitlines()
+    assert loud.returncode == 0 and " started: " in lines[0], loud.stderr
+    assert "]: stopped at t = 0.300 s, 0.290 s simulated in " in lines[-1]
+    assert lines[-1].endswith("; no recording; 0 commands refused, 0 late ticks")
+    assert "real-time factor   0.00" not in loud.stdout

@@ -166,7 +166,7 @@ def test_the_slowest_node_still_stops_on_sigterm_at_once(tmp_path):
     """One tick an hour: the loop sleeps in slices, so SIGTERM ends it within a slice."""
     env = os.environ | {"ROS_DOMAIN_ID": "200", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     process = subprocess.Popen(
-        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--quiet",
+        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds",
          "--ros-args", "-p", f"real_time_factor:={0.01 / node_params.MAX_WALL_PERIOD!r}"],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -192,7 +192,7 @@ def test_a_tick_of_minutes_stops_on_one_sigterm():
          "stability.MAX_SUBSTEPS = 10 ** 9\n"
          "from arm_sim_ros.node.params import rebuild\n"   # it would refuse the plan: not the point
          "rebuild.planned_substeps = lambda sim: 1\nfrom arm_sim_ros.node.main import main\n"
-         "sys.exit(main(sys.argv[1:]))", "--transport", "dds", "--quiet", "--ros-args",
+         "sys.exit(main(sys.argv[1:]))", "--transport", "dds", "--ros-args",
          "-p", "scene:=compliant_limit", "-p", "joint_limits.damping:=1e8",
          "-p", "initial_positions:=[0.1, 1.95]", "-p", "initial_velocities:=[0.0, 3.0]"],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

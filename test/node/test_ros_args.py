@@ -137,3 +137,46 @@ def test_rclpy_types_the_table_the_same_way(text, expected):
     if isinstance(expected, list):
         value = list(value)
     assert type(value) is type(expected) and value == expected
+
+
+# --- degrees: the one rule (test/physics/test_degrees.py) on the node's parameters -----------
+
+@pytest.mark.parametrize("assignment, name, expected", [
+    ("initial_positions:=[90deg, 0deg]", "initial_positions", [math.pi / 2, 0.0]),
+    ("initial_positions:=90deg,-30deg", "initial_positions", [math.pi / 2, -math.pi / 6]),
+    ("sensors.position_resolution:=[0.1deg, 0.1deg]", "sensors.position_resolution",
+     [math.radians(0.1)] * 2),
+    ("joint_limits.lower:=[-90deg, -150deg]", "joint_limits.lower",
+     [-math.pi / 2, math.radians(-150)]),
+])
+def test_the_node_takes_degrees_where_arm_sim_does(assignment, name, expected):
+    """It refused `90deg` ("must be a number, got '90deg'") and its error did not say why."""
+    from arm_sim_ros.node.params.parameters import SPECS
+    from arm_sim_ros.node.params.values import coerce
+
+    (_, key, value), = parse_ros_args(["-p", assignment])["assignments"]
+    assert coerce(SPECS[key], value) == pytest.approx(expected, rel=1e-15)
+
+
+def test_a_key_that_is_no_angle_refuses_deg_on_the_node_saying_which_take_it():
+    from arm_sim_ros.node.params.parameters import SPECS
+    from arm_sim_ros.node.params.values import ParameterRefused, coerce
+
+    with pytest.raises(ParameterRefused, match="only angles take deg, the keys in rad: "
+                                               "initial_positions, "):
+        coerce(SPECS["damping"], "5deg")
+
+
+def test_a_list_that_mixes_degrees_and_numbers_says_how_to_write_it():
+    with pytest.raises(UsageError, match=r"takes deg on every number: \[90deg, 0deg\]"):
+        parsed("[90deg, 0]")
+
+
+def test_an_empty_value_the_shell_stripped_says_how_to_keep_it():
+    """scripts/run's own hint, `-p rerun_path:=""`, reaches rcl as `rerun_path:=`."""
+    with pytest.raises(UsageError) as error:
+        parse_ros_args(["-p", "rerun_path:="])
+    assert str(error.value) == ("-p rerun_path:='' has no value; empty text is YAML's '', which "
+                                "the shell must keep: -p \"rerun_path:=''\"")
+    (_, _, value), = parse_ros_args(["-p", "rerun_path:=''"])["assignments"]
+    assert value == ""

@@ -68,10 +68,11 @@ def test_step_simulation_lockstep_and_pauses_leave_the_stream_as_it_was():
     expected = offline(make_core(), 40)
     stepped, locked, paused = make_core(), make_core(lockstep=True), make_core()
     got = {"stepped": [], "locked": [], "paused": []}
+    assert len(locked.lockstep.take()) == 1                   # the state awaiting its answer
     for k in range(40):
         got["stepped"].append(stepped.step_tick())             # StepSimulation, one by one
         locked.on_command([0.0, 0.0])                          # each command ticks once
-        got["locked"] += locked.take_lockstep_states()
+        got["locked"] += locked.lockstep.take()
         paused.paused = k % 3 == 0                             # paused ticks: time stands still
         held = paused.tick(0.0)
         paused.paused = False
@@ -160,3 +161,19 @@ def test_dds_readings_and_truth_are_bit_identical_to_offline():
     assert [m.header.stamp for m in truths] == [m.header.stamp for m in readings[first:]]
     assert readings[-1].position != truths[-1].position
     node.close()
+
+
+@pytest.mark.parametrize("every", [False, True], ids=["set (dds)", "every parameter (rclpy)"])
+def test_a_physics_that_cannot_be_built_at_start_blames_the_key_that_was_set(every):
+    """Issue 47: an offset of 1e308 read in counts of 1e-300 rad overflows as the sensors are
+    built; the refusal blamed `policy` (the first parameter) at start. rclpy hands over every
+    parameter, set or not: the one blamed is one whose value is not the scene's default."""
+    from arm_sim_ros.node.params.parameters import scene_defaults
+
+    hostile = {"sensors.position_offset": [1e308, 1e308],
+               "sensors.position_resolution": [1e-300, 1e-300]}
+    given = (scene_defaults("release") if every else {}) | {"scene": "release"} | hostile
+    with pytest.raises(ParameterRefused) as refused:
+        ArmSimCore(resolve_parameters(given), logging.getLogger("test_sensors"),
+                   wall_clock=lambda: 0.0, start_stamp_ns=0)
+    assert refused.value.name in hostile, str(refused.value)

@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from arm_sim_ros.physics import model
 from arm_sim_ros.physics.stepping.integrators import RK4, ButcherTableau, compile_step
-from arm_sim_ros.physics.scene import Scene, load_scene
+from arm_sim_ros.physics.scene import Scene, SceneError, load_scene
 from arm_sim_ros.physics.simulator import Simulator
 from arm_sim_ros.physics.stepping.stability import (RK4_REAL_LIMIT, SUBSTEP_FRACTION,
                                                     inverse_mass_eigenvalue,
@@ -131,6 +131,24 @@ def test_just_above_the_limit_plain_rk4_gains_energy_and_the_simulator_does_not(
     assert energies(scene, out).max() <= energies(scene, out)[0] + 1e-9
     assert [e.kind for e in sim.events] == ["substepping"]
     assert "2.785" in sim.events[0].message and f"{sim.substeps} sub-steps" in sim.events[0].message
+
+
+def test_with_the_stability_plan_off_each_step_is_whole_and_a_run_past_the_limit_diverges():
+    """stability_plan off (a stability study): the step just past the limit is raw RK4's,
+    bit for bit, until the divergence check holds the last sound state; just below, the
+    same as with the plan on."""
+    h = 0.01
+    above = DAMPED.replace(step_size=h, stability_plan="off",
+                           damping=1.2 * RK4_REAL_LIMIT / (h * worst_stiffness(RODS)))
+    sim, out = sim_run(above, 200)
+    assert sim.substeps == 1 and sim.diverged
+    assert "2.785" in sim.events[0].message and "stability_plan off" in sim.events[0].message
+    sound = next(k for k, y in enumerate(out) if y == out[-1])
+    assert 0 < sound and out[:sound + 1] == raw_rk4_run(above, sound)
+    below = above.replace(damping=0.99 * RK4_REAL_LIMIT / (h * worst_stiffness(RODS)))
+    assert sim_run(below, 100)[1] == sim_run(below.replace(stability_plan="on"), 100)[1]
+    with pytest.raises(SceneError, match="stability_plan 'never' is unknown"):
+        DAMPED.replace(stability_plan="never")
 
 
 def radau_positions(scene, times):

@@ -7,12 +7,14 @@ ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").rglob("*.md"))
 LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)")
 CODE = re.compile(r"```.*?```|`[^`\n]*`", re.S)
+FENCED = re.compile(r"```.*?```", re.S)
 
 
 def anchors(page: Path) -> set:
-    """GitHub's anchors of a page's headings: lower case, punctuation dropped, spaces to -."""
+    """GitHub's anchors of a page's headings: lower case, punctuation dropped (a code span's
+    text kept, its backticks dropped), spaces to -."""
     found = set()
-    for heading in re.findall(r"^#+\s+(.*)$", CODE.sub("", page.read_text(encoding="utf-8")), re.M):
+    for heading in re.findall(r"^#+\s+(.*)$", FENCED.sub("", page.read_text(encoding="utf-8")), re.M):
         slug = re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
         found.add(slug)
     return found
@@ -40,6 +42,7 @@ def test_every_relative_link_leads_somewhere():
 def test_the_link_finder_sees_links_and_skips_code(tmp_path):
     page = tmp_path / "page.md"
     page.write_text("# A title\n[one](other.md#a-title) `[not](x.md)` ![pic](p.png)\n"
-                    "```\n[nor](y.md)\n```\n", encoding="utf-8")
+                    "```\n[nor](y.md)\n# not a heading\n```\n## Tables (`bench_speed.py`)\n",
+                    encoding="utf-8")
     assert links(page) == ["other.md#a-title"]
-    assert anchors(page) == {"a-title"}
+    assert anchors(page) == {"a-title", "tables-bench_speedpy"}

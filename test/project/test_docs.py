@@ -131,6 +131,9 @@ def test_every_block_of_the_file_runs(path, reader):
         assert done.returncode == 0, (
             f"{path.relative_to(ROOT)}:{line} ({language}) exited {done.returncode}\n"
             f"--- stdout\n{done.stdout[-3000:]}\n--- stderr\n{done.stderr[-3000:]}")
+        # numpy 2's repr of a scalar is no number a reader expects (the README's bag snippet
+        # printed [np.float64(-2.46...), ...])
+        assert "np.float64(" not in done.stdout, f"{path.relative_to(ROOT)}:{line}: {done.stdout}"
 
 
 def test_the_reading_order_is_the_readme_then_the_index_in_its_order():

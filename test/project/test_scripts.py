@@ -73,7 +73,7 @@ def test_with_ros_sourced_and_a_decoy_on_path_run_starts_this_checkouts_node(tmp
     venv = fake_venv(tmp_path / "venv")
     env = node_env(venv, ROS_DISTRO="jazzy", PATH=decoy_path(tmp_path / "elsewhere"))
     recording = tmp_path / "run.rrd"
-    done = run([str(checkout / "scripts/run"), "--duration", "0.3", "--quiet",
+    done = run([str(checkout / "scripts/run"), "--duration", "0.3",
                 "--ros-args", "-p", f"rerun_path:={recording}"], env)
     assert done.returncode == 0, done.stderr
     assert not (checkout / "runs").exists()        # a recording named by the user: theirs alone
@@ -93,7 +93,7 @@ def test_run_can_be_run_again_and_again_each_run_a_recording_of_its_own(tmp_path
     env.pop("ROS_DISTRO", None)
     named = []
     for _ in range(3):
-        done = run([str(checkout / "scripts/run"), "--duration", "0.05", "--quiet"], env)
+        done = run([str(checkout / "scripts/run"), "--duration", "0.05"], env)
         assert done.returncode == 0, done.stderr
         started = [line for line in done.stderr.splitlines() if "started" in line]
         assert len(started) == 1 and "; recording runs/arm_sim_" in started[0], done.stderr
@@ -153,8 +153,8 @@ def test_setup_runs_pip_once_and_again_only_when_setup_py_changes(tmp_path):
         assert done.returncode == 0, done.stderr
         return pip_calls(venv)
 
-    assert test_script() == [f"-m pip install -q --disable-pip-version-check --only-binary "
-                             f"numba,llvmlite -e {checkout}[test,bench,fit,fast]"]
+    assert test_script() == [f"-m pip install --disable-pip-version-check --progress-bar off "
+                             f"--only-binary numba,llvmlite -e {checkout}[test,bench,fit,fast]"]
     assert len(test_script()) == 1                      # set up: no pip, no network
     (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
     assert run([str(checkout / "scripts/run")], env).returncode == 0
@@ -177,6 +177,40 @@ def test_a_venv_installed_from_another_checkout_is_installed_again(tmp_path):
         f"{first}[test,bench,fit,fast]"]
 
 
+def test_set_up_says_why_it_installs_and_shows_its_progress(tmp_path):
+    """It said "setup.py is new to this venv" whatever was new, then ~53 s of nothing."""
+    checkout = copy_of_checkout(tmp_path)
+    venv = fake_venv(tmp_path / "venv")
+    python = venv / "bin/python"          # pip as it talks: a line per package, then the install
+    python.write_text(python.read_text().replace(
+        'exit 0; fi', 'printf "Collecting numpy==2.4.6\\n  Using cached numpy.whl\\nCollecting '
+        'scipy==1.17.1\\nInstalling collected packages: numpy, scipy\\n"; exit 0; fi'))
+    (venv / "bin/arm_sim_node").write_text("#!/bin/sh\nexit 0\n")
+    env = dict(os.environ, ARM_SIM_VENV=str(venv))
+    env.pop("ROS_DISTRO", None)
+
+    def said(script):
+        done = run([str(checkout / "scripts" / script)] + (["--version"] if script == "test"
+                                                          else []), env)
+        assert done.returncode == 0, done.stderr
+        return [line for line in done.stderr.splitlines() if line.startswith("scripts:")]
+
+    first = said("run")
+    assert first[0] == (f"scripts: installing {checkout} into {venv} (nothing of this checkout "
+                        "is installed in it yet); about a minute on first set-up, one line per "
+                        "package")
+    assert first[1:] == ["scripts: pip: collecting numpy==2.4.6",
+                         "scripts: pip: collecting scipy==1.17.1",
+                         "scripts: pip: installing 2 packages (the longest step)",
+                         "scripts: installed; later runs start at once, with no network"]
+    assert said("test")[0].endswith(" (the extras test,bench,fit are new to this venv); about a "
+                                    "minute on first set-up, one line per package")
+    with open(checkout / "setup.py", "a") as setup:
+        setup.write("# a dependency changed\n")
+    assert "(setup.py changed since its last install)" in said("test")[0]
+    assert said("test") == []                            # set up: nothing to say
+
+
 @pytest.mark.parametrize("script, extras", [("run", ""), ("test", "test,bench,fit")])
 def test_numba_without_a_wheel_leaves_the_pure_python_path_in_one_line(tmp_path, script,
                                                                       extras):
@@ -197,7 +231,8 @@ def test_numba_without_a_wheel_leaves_the_pure_python_path_in_one_line(tmp_path,
     assert said == ["scripts: numba (the compiled path) has no wheel for this machine: the "
                     "simulator runs its pure-Python path (slower, the same numbers)"]
     target = f"{checkout}[{extras}]" if extras else str(checkout)
-    assert pip_calls(venv) == [f"-m pip install -q --disable-pip-version-check -e {target}"]
+    assert pip_calls(venv) == [f"-m pip install --disable-pip-version-check --progress-bar off "
+                               f"-e {target}"]
     assert run(command, env).returncode == 0
     assert len(pip_calls(venv)) == 1                    # set up: not tried on every run
 

@@ -51,3 +51,16 @@ def test_a_joint_that_never_moved_is_said_and_exits_1(capsys, tmp_path):
                               "--noise", "1e-4,1e-3")
     assert status == 1 and out.startswith("wrote")
     assert "shoulder_joint and elbow_joint never moved" in err
+
+
+@pytest.mark.parametrize("args", [
+    ["--set", "sensors.delay=5", "--duration", "1"],    # read 5 s late: the readout is still
+    ["--set", "sensors.position_resolution=100,100", "--set", "sensors.velocity=differences"],
+    ["--noise", "1e3,1e3"]])                            # the motion drowned in the noise added
+def test_readings_that_show_none_of_the_motion_exit_1(capsys, tmp_path, args):
+    """Issue 47: `--set sensors.delay=5 --duration 1` recorded a still readout of a moving
+    arm and exited 0. What is judged is what was recorded, as a fit reads it, not the truth."""
+    status, out, err = excite(capsys, tmp_path / "bag", *args)
+    assert status == 1 and out.startswith("wrote") and len(err.splitlines()) == 1
+    assert ("the readings of shoulder_joint and elbow_joint in " + str(tmp_path / "bag")
+            + " show no motion beyond their noise") in err

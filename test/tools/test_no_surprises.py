@@ -52,8 +52,8 @@ def test_the_node_says_what_its_robot_description_replaced(tmp_path, capsys):
                                              "robot_description": urdf.read_text()})
     node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0).finish()
     assert [m for _, m in log.lines if "started" in m] == [
-        "scene damped_release started: policy command, h = 0.01 s, 1 steps per tick; "
-        "robot_description replaced: damping 0.5 -> 0; joint_limits none -> {lower, upper}"]
+        "scene damped_release started: policy command, h = 0.01 s, rk4, 1 steps per tick; "
+        "estimate global, tolerance 5e-05; robot_description replaced: damping 0.5 -> 0; joint_limits none -> {lower, upper}"]
 
 
 def test_an_initial_angle_beyond_a_full_turn_warns_once_and_suggests_degrees(capsys):
@@ -77,13 +77,13 @@ def test_only_angles_take_degrees(capsys):
     assert "only angles take deg" in capsys.readouterr().err
 
 
-def test_the_node_warns_of_an_initial_angle_beyond_a_full_turn_with_the_radians():
+def test_the_node_warns_of_an_initial_angle_beyond_a_full_turn_with_the_degrees_it_takes():
     log = ListLog()
     config = node_params.resolve_parameters({"initial_positions": [90.0, 0.0]})
     node_core.ArmSimCore(config, log, wall_clock=lambda: 0.0).finish()
     assert [m for level, m in log.lines if level == "warning"] == [
         "initial_positions [90.0, 0.0] rad: 90 rad is more than a full turn (2π = 6.283 rad); "
-        "angles are radians. If you meant degrees, write -p initial_positions:=[1.5708, 0]"]
+        "angles are radians. If you meant degrees, write -p \"initial_positions:=[90deg, 0deg]\""]
 
 
 def test_a_misspelt_preset_gets_a_did_you_mean():
@@ -151,8 +151,8 @@ def test_clock_origin_is_checked_and_start_only():
 def test_the_node_stops_on_sigint_even_when_started_with_sigint_ignored(tmp_path):
     """`cmd &` in a script starts it with SIGINT ignored; Python would keep it ignored."""
     env = dict(os.environ, ROS_DOMAIN_ID="208", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node = subprocess.Popen([str(BIN / "arm_sim_node"), "--transport", "dds", "--quiet"],
-                            env=env, stderr=subprocess.PIPE, text=True,
+    node = subprocess.Popen([str(BIN / "arm_sim_node"), "--transport", "dds"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     try:
         assert "started" in node.stderr.readline()

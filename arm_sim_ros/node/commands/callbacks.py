@@ -1,5 +1,7 @@
 """The node's command callbacks: torque, JointState and set-point commands handed to the
-intake (commands.py), then applied to the simulator by the core (core.py) they are part of."""
+intake (commands.py), then applied to the simulator by the core (core.py) they are part of;
+in lockstep, each answers the latest state (schedule.Lockstep) and so lets the next tick
+happen."""
 from __future__ import annotations
 
 from ...physics.effects import servo
@@ -13,9 +15,15 @@ class CommandInput:
         return self._apply(*self.commands.take(data, self.config.scene.policy,
                                                self.config.values["torque_limit"], self.sim.time))
 
-    def on_joint_state_command(self, names, position, velocity, effort) -> str | None:
+    def on_joint_state_command(self, names, position, velocity, effort,
+                               stamp_ns: int | None = None) -> str | None:
         """Take a sensor_msgs/JointState command from joint_commands (values by joint name,
-        each joint taking what its servo.interface takes); returns the refusal reason, if any."""
+        each joint taking what its servo.interface takes); returns the refusal reason, if any.
+        `stamp_ns`, its header's: in lockstep, the state it answers (schedule.Lockstep)."""
+        if self.config.values["lockstep"] and not self.lockstep.answers(
+                stamp_ns, self.start_stamp_ns):
+            self._stale(stamp_ns)
+            return None
         v, interfaces = self.config.values, servo.interfaces(self.sim.dynamics)
         return self._apply(*self.commands.take_joint_state(
             names, (position, velocity, effort), v["joint_names"], interfaces,
@@ -31,8 +39,24 @@ class CommandInput:
             self.recorder.refused(reason)
         elif command is not None or setpoints:
             self._set_command(*self.commands.value, setpoints)
-        if reason is None and self.config.values["lockstep"] and not self.paused:
-            # a tick per command, an all-NaN one too (ros2_control's hardware sends those
-            # while no controller claims the joints: controller_manager's cycles wait on it)
-            self.lockstep_states.append(self._tick())
+        if self.config.values["lockstep"]:
+            # The latest state is answered: by an all-NaN command too (ros2_control's
+            # hardware sends those while no controller claims the joints, and
+            # controller_manager's cycles wait on the tick), and by a refused one, the loop
+            # going on under the last good command.
+            self.lockstep.answered = True
+            self.lockstep_tick()
         return reason
+
+    def lockstep_tick(self) -> None:
+        """In lockstep, the tick the answer to the latest state lets happen, unless paused
+        (a paused node holds the answer until it plays or is stepped)."""
+        if self.lockstep.answered and not self.paused:
+            self.lockstep.queue(self._tick())
+
+    def _stale(self, stamp_ns: int) -> None:
+        self.lockstep.stale += 1
+        self.warnings.warning("stale", f"a command answered the state at {stamp_ns} ns, "
+                              f"which was answered already (the latest is at "
+                              f"{self.lockstep.published} ns): ignored, as lockstep ticks "
+                              "once per state")

@@ -107,6 +107,7 @@ class CommandIntake:
     def __init__(self, log, warnings: RateLimitedLog):
         self.log, self.warnings = log, warnings
         self.received = self.refused = self.timeouts = 0
+        self.last_refusal = "none"        # why the latest refused command was (diagnostics)
         self._said = set()                # (joint, interface, field) ignored, said once
         self.restart()
 
@@ -226,7 +227,7 @@ class CommandIntake:
 
     def _refuse(self, kind: str, text: str, reason: str):
         """Count a refused command and warn (rate-limited); (reason, no command)."""
-        self.refused += 1
+        self.refused, self.last_refusal = self.refused + 1, reason
         self.warnings.warning(kind, f"{text} (refused so far: {self.refused})")
         return reason, None
 

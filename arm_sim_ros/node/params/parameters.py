@@ -5,7 +5,7 @@ cannot take is refused with a reason (`ParameterRefused`) and nothing changes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 from ...interface import JOINT_COMMANDS_TOPIC, JOINT_NAMES, JOINT_STATES_TOPIC
 from ...physics.effects import EffortLimits
@@ -167,8 +167,13 @@ PARAMETERS = (
     ParameterSpec("clock_origin", "str", "zero", "what /clock and the stamps count from: zero "
                   "(simulated time from 0 at start, as Gazebo does) or wall (the wall clock at "
                   "start + simulated time)", when=START),
-    ParameterSpec("lockstep", "bool", False, "advance exactly one tick per torque command "
-                  "received, for deterministic controller tests"),
+    ParameterSpec("lockstep", "bool", False, "advance exactly one tick per command that "
+                  "answers the latest state (a JointState command carrying its stamp; an "
+                  "unstamped command answers the latest on arrival), for deterministic "
+                  "controller tests"),
+    ParameterSpec("paused", "bool", False, "start paused: no physics until the Simulation "
+                  "Interfaces' set_simulation_state plays or step_simulation steps (a test "
+                  "starts the loop when its controller is up)", when=START),
     ParameterSpec("lockstep_wait", "float", 0.1, "in lockstep, while a node listens on "
                   "/clock, a tick of its own once no command came for this long (wall s; 0 = "
                   "never): controller_manager under use_sim_time waits for the clock to move "
@@ -199,6 +204,9 @@ class NodeConfig:
     values: dict
     scene: Scene
     steps_per_tick: int
+    # the parameters given a value other than the scene's default at start: the ones a
+    # physics that cannot be built is blamed on (rclpy hands every parameter over, set or not)
+    given: tuple = field(default=(), compare=False)
 
     @property
     def tick_period(self) -> float:
@@ -239,7 +247,8 @@ def resolve_parameters(overrides: dict) -> NodeConfig:
                                 for name in READ_ONLY))
     config = _build(values | dict(overrides), load=lambda _: scene, changed=list(overrides))
     check_recording(config.values)
-    return config
+    return replace(config, given=tuple(n for n in overrides
+                                       if config.values[n] != coerce(SPECS[n], values[n])))
 
 
 def check_recording(values: dict, names=RECORDING) -> None:

@@ -88,8 +88,11 @@ def rcl_value(node, what: str):
         values = [rcl_value(item, what) if isinstance(item, yaml.ScalarNode) else
                   _nested(what) for item in node.value]
         if len({type(v) for v in values}) > 1:
+            degrees = any(isinstance(v, str) and v.endswith("deg") for v in values)
             raise UsageError(f"{what}: a list must hold one type (all numbers with a dot, all "
-                             f"integers, all text or all true/false), got {node_text(node)}")
+                             f"integers, all text or all true/false), got {node_text(node)}"
+                             + ("; an angle in degrees takes deg on every number: "
+                                "[90deg, 0deg]" if degrees else ""))
         return values
     raise UsageError(f"{what}: a parameter value is a scalar or a list, not a mapping")
 
@@ -167,8 +170,9 @@ def _assignment(flag: str, text: str) -> tuple[str, str]:
 def _param_value(name: str, text: str):
     what = f"-p {name}:={text[:40]!r}"
     node = compose(text, what)
-    if node is None:
-        raise UsageError(f"{what} has no value")
+    if node is None:      # `-p name:=""` in a shell: the shell took the quotes, as rcl sees it
+        raise UsageError(f"{what} has no value; empty text is YAML's '', which the shell "
+                         f"must keep: -p \"{name}:=''\"")
     return rcl_value(node, what)
 
 

@@ -4,7 +4,7 @@ the value the node keeps. The declarations themselves are in parameters.py."""
 from __future__ import annotations
 
 from ...physics.model import BRIEF, ParameterError, brief
-from ...physics.scene import SceneError, coerce_value
+from ...physics.scene import SceneError, coerce_value, in_radians
 from ...usage import one_line
 
 
@@ -38,6 +38,11 @@ def coerce(spec, value):
     kind, name = spec.kind, spec.name
     if value is False and name in FALSE_AS_TEXT:
         value = FALSE_AS_TEXT[name]
+    if kind != "str":                 # an angle in degrees, `90deg`, as everywhere
+        try:
+            value = in_radians(name, value)
+        except SceneError as error:
+            raise ParameterRefused(name, str(error)) from None
     if spec.effect is not None:
         # not set: the effect's default, or no effect at all. `ros2 param dump` writes a
         # parameter not set as YAML null, which rcl reads back as the text "null".

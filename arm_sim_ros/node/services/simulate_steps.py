@@ -111,6 +111,8 @@ class StepsGoals:
                          interrupted(goal.completed, goal.steps, self.control.why))
             return None
         if goal.remaining:
+            if not self.control.ready():      # lockstep: the tick waits for its answer
+                return None
             code, message = self.control.step(1)
             if code != RESULT_OK:             # set playing meanwhile
                 self._finish(goal, STATUS_ABORTED, code,

@@ -6,7 +6,8 @@ SimulateSteps action's goals: simulate_steps.py.
 
 One simulation step here is one tick of the node: steps_per_tick integration steps and one
 JointState (and /clock) published. Paused: no physics, /clock holds, the held JointState
-still goes out at the publish rate. Stopped is reset and paused (SimulationState.msg).
+still goes out at the publish rate (in lockstep: once, and a tick asked for waits for the
+command that answers the latest state, as every lockstep tick does). Stopped is reset and paused (SimulationState.msg).
 Resetting keeps stamps increasing (a clock that jumps back breaks use_sim_time nodes), so
 the SCOPE_TIME reset is not offered (nor SCOPE_ALL, which holds it).
 
@@ -65,7 +66,8 @@ class SimulationControl:
         `take_commands()`: hands the commands waiting to the core, so that a command sent
         (and acknowledged) before a step request acts in the steps: deterministic."""
         self.core, self.publish, self.take_commands = core, publish, take_commands
-        self.state = STATE_PLAYING
+        self.state = STATE_PAUSED if core.config.values["paused"] else STATE_PLAYING
+        core.paused = self.state == STATE_PAUSED
         self.calls = deque()          # StepSimulation calls, the first ticking
         self.epoch, self.why = 0, ""  # raised by play and stop: stepping begun before ends
         self.goal_running = lambda: False   # the SimulateSteps server's (it attaches it)
@@ -86,6 +88,8 @@ class SimulationControl:
         if target != STATE_PAUSED:    # a goal or call stepping stops here, its reply says so
             self.interrupt(f"set {STATE_NAMES[target]}")
         self.state, self.core.paused = target, target != STATE_PLAYING
+        if target == STATE_PLAYING:
+            self.core.lockstep_tick()       # in lockstep, an answer held while paused
         self.core.log.info(f"simulation {STATE_NAMES[target]} at t = {self.core.sim.time:.6f} s")
         return RESULT_OK, ""
 
@@ -102,6 +106,10 @@ class SimulationControl:
         for _ in range(steps):
             self.publish(self.core.step_tick())
         return RESULT_OK, ""
+
+    def ready(self) -> bool:
+        """A tick asked for may happen now: in lockstep, once the latest state is answered."""
+        return not self.core.config.values["lockstep"] or self.core.lockstep.answered
 
     def call_steps(self, steps: int, done) -> tuple[int, str] | None:
         """A StepSimulation call: (code, message) at once where it cannot run (or asks for
@@ -122,6 +130,8 @@ class SimulationControl:
         call = self.calls[0]
         if not call.completed and self.take_commands is not None:
             self.take_commands()     # sent before the call: they act in its steps
+        if not self.ready():         # lockstep: each tick waits for its answer
+            return False
         self.publish(self.core.step_tick())
         call.completed += 1
         if call.completed == call.steps:

@@ -28,7 +28,7 @@ from ..core import ArmSimCore
 from ..diagnostics import DiagnosticData, JointStateData
 from ..params.parameters import resolve_parameters
 from ..params.ros_args import remap_name
-from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
+from ..schedule import TickSchedule
 from ..services.simulation import SimulationControl
 from .dds_graph import NameWatch
 from .dds_services import DdsServices
@@ -104,6 +104,7 @@ class DdsArmSimNode:
         self.simulation = SimulationControl(self.core, self._publish, self.take_commands)
         self.services.attach(self.core, self.simulation)
         self._publish_clock()      # use_sim_time nodes (controller_manager) wait for a first one
+        self._publish_lockstep()   # in lockstep, the state the first command answers
 
     def _reader(self, topic_name: str, message_type) -> DataReader:
         return DataReader(self.participant, Topic(self.participant, topic_name, message_type),
@@ -153,14 +154,15 @@ class DdsArmSimNode:
                     count += 1
         for sample in self.joint_command_reader.take(N=256):
             if isinstance(sample, msg.JointState):
+                stamp = sample.header.stamp
                 self.core.on_joint_state_command(sample.name, sample.position, sample.velocity,
-                                                 sample.effort)
+                                                 sample.effort, stamp.sec * 10**9 + stamp.nanosec)
                 count += 1
         return self._publish_lockstep(count)
 
     def _publish_lockstep(self, count: int = 0) -> int:
-        for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data, STATE_BEFORE_CLOCK)
+        for data in self.core.lockstep.take():   # lockstep: a tick per answer
+            self._publish(data)
         return count
 
     def tick(self, wall_now: float | None = None) -> JointStateData | None:
@@ -173,10 +175,16 @@ class DdsArmSimNode:
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
+    def _publish(self, data: JointStateData) -> None:
         """joint_states and /clock, serialized straight from the data (cdr.py: the bytes a
-        messages.JointState and messages.Clock serialize to, with neither built); with sensors,
-        the readings there and the state on ~/true_joint_states at the same stamp."""
+        messages.JointState and messages.Clock serialize to, with neither built)."""
+        self._publish_states(data)
+        if self.core.config.values["publish_clock"]:     # after the state: its time
+            write_cdr(self.clock_writer, clock_cdr(*split_stamp(data.stamp_ns)))
+
+    def _publish_states(self, data: JointStateData) -> None:
+        """joint_states; with sensors, the readings there and the state on
+        ~/true_joint_states at the same stamp."""
         sec, nanosec = split_stamp(data.stamp_ns)
         write_cdr(self.joint_state_writer, joint_state_bytes(
             sec, nanosec, data.frame_id, data.name, data.position, data.velocity, data.effort))
@@ -188,10 +196,6 @@ class DdsArmSimNode:
             write_cdr(self.truth_writer, joint_state_bytes(
                 sec, nanosec, truth.frame_id, truth.name, truth.position, truth.velocity,
                 truth.effort))
-        if self.core.config.values["publish_clock"]:
-            if clock_after:               # a lockstep tick: the state first, then /clock
-                time.sleep(clock_after)
-            write_cdr(self.clock_writer, clock_cdr(sec, nanosec))
 
     def _publish_clock(self) -> None:
         """The current time on /clock: at start, and while lockstep waits for a command."""
@@ -219,15 +223,10 @@ class DdsArmSimNode:
             if stopped is not None and stopped():
                 raise KeyboardInterrupt
             now = self.wall_clock()
-            if self.core.config.values["lockstep"] and not self.core.paused:
-                self.services.poll()                   # commands tick: wait for them
+            if self.core.config.values["lockstep"]:
+                self.services.poll()                   # answers tick: wait for them
                 if not self.take_commands(timeout=LOCKSTEP_WAIT):
-                    listened = clock_listened(self.core, self.clock_writer)
-                    data = self.core.tick(now, listened)   # lockstep_wait: a tick of its own
-                    if data is None:
-                        self._publish_clock()          # the time, while nobody commands
-                    else:
-                        self._publish(data)
+                    lockstep_idle(self, now)
             elif schedule.wait(now) > 0:
                 # sleep, serving, in slices: a signal is handled and a new period (a
                 # parameter set) is taken up within SERVE_SLICE
@@ -243,7 +242,7 @@ class DdsArmSimNode:
             if now >= next_status:
                 self._status(now, on_status)
                 next_status = now + 1.0
-        self._status(self.wall_clock(), on_status)
+        self._status(self.wall_clock(), None)     # the last diagnostics; the stop line says the rest
 
     def _status(self, now: float, on_status) -> None:
         self.name_watch.check()
@@ -262,3 +261,19 @@ class DdsArmSimNode:
         self.setpoint_readers = {}
         self.joint_state_writer = self.diagnostics_writer = self.participant = None
         self.truth_writer = None
+
+
+def lockstep_idle(node: DdsArmSimNode, now: float) -> None:
+    """No answer came for LOCKSTEP_WAIT: the time on /clock (a use_sim_time peer may wait
+    for it), or lockstep_wait's tick of its own; the state awaiting its answer again where
+    it may not have reached a controller (schedule.Lockstep.resend); and what the recorder
+    keeps, to its file."""
+    core = node.core
+    data = core.tick(now, clock_listened(core, node.clock_writer))
+    if data is None:
+        node._publish_clock()
+    else:
+        node._publish(data)
+    if data is None and core.lockstep.resend(msg.matched(node.joint_state_writer), now):
+        node._publish_states(core.joint_state())
+    core.recorder.idle()

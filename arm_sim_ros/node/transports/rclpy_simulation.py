@@ -98,6 +98,9 @@ def executor(control, action, result_type, listening, running=None):
                     await Turn()
                 epoch = control.epoch
                 while done < steps and not goal_handle.is_cancel_requested:
+                    if control.epoch == epoch and not control.ready():
+                        await Turn()            # lockstep: the tick waits for its answer
+                        continue
                     code, why = (RESULT_OPERATION_FAILED, control.why) if (
                         control.epoch != epoch) else control.step(1)
                     if code != RESULT_OK:           # set playing or stopped meanwhile

@@ -12,6 +12,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -28,7 +29,7 @@ from ..services.parameter_services import could_not_apply
 from ..params.parameters import (PARAMETERS, READ_ONLY, SPECS, resolve_parameters,
                                  scene_defaults)
 from ..params.values import ParameterRefused
-from ..schedule import STATE_BEFORE_CLOCK, TickSchedule
+from ..schedule import TickSchedule
 from ..services.simulation import SimulationControl
 from ..wire.cdr import clock_cdr, joint_state_bytes
 from . import rclpy_simulation
@@ -110,22 +111,30 @@ class ArmSimNode(Node):
         # else these, filled anew every tick (not `_clock`: rclpy's Node has its own)
         self.joint_state_message, self.clock_message = JointState(), Clock()
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        # Commands and the tick timer in a group of their own: a step_simulation or
+        # simulate_steps coroutine holds the default group until it ends, and in lockstep
+        # each of its ticks waits for the command that answers the state before it (and the
+        # timer sends that state again where it may not have reached the controller).
+        self.loop_group = commands = MutuallyExclusiveCallbackGroup()
         self.command_subscription = self.create_subscription(
-            Float64MultiArray, COMMAND_TOPIC, self.on_command, 10)
+            Float64MultiArray, COMMAND_TOPIC, self.on_command, 10, callback_group=commands)
         self.joint_command_subscription = self.create_subscription(
-            JointState, values["joint_commands_topic"], self.on_joint_command, 10)
+            JointState, values["joint_commands_topic"], self.on_joint_command, 10,
+            callback_group=commands)
         self.setpoint_subscriptions = [
             self.create_subscription(Float64MultiArray, name,
                                      lambda message, field=field: self.on_setpoint(field, message),
-                                     10)
+                                     10, callback_group=commands)
             for field, name in SETPOINT_TOPICS.items()]
         self.reset_service = self.create_service(Trigger, "~/reset", self.on_reset)
         self.simulation = SimulationControl(self.core, self._publish)
         self.simulation_services = rclpy_simulation.serve(self, self.simulation)
         self.schedule = TickSchedule(self.core.wall_clock())
-        self.tick_timer = self.create_timer(config.wall_period, self.on_timer)
+        self.tick_timer = self.create_timer(config.wall_period, self.on_timer,
+                                            callback_group=self.loop_group)
         self.diagnostics_timer = self.create_timer(1.0, self.on_diagnostics)
         self._publish_clock()           # use_sim_time nodes (controller_manager) wait for one
+        self._publish_lockstep()        # in lockstep, the state the first command answers
 
     def on_command(self, message: Float64MultiArray) -> None:
         self.core.on_command(list(message.data))
@@ -136,20 +145,32 @@ class ArmSimNode(Node):
         self._publish_lockstep()
 
     def on_joint_command(self, message: JointState) -> None:
+        stamp = message.header.stamp
         self.core.on_joint_state_command(list(message.name), list(message.position),
-                                         list(message.velocity), list(message.effort))
+                                         list(message.velocity), list(message.effort),
+                                         stamp.sec * 10**9 + stamp.nanosec)
         self._publish_lockstep()
 
     def _publish_lockstep(self) -> None:
-        for data in self.core.take_lockstep_states():   # lockstep: a tick per command
-            self._publish(data, STATE_BEFORE_CLOCK)
+        for data in self.core.lockstep.take():   # lockstep: a tick per answer
+            self._publish(data)
 
     def on_timer(self) -> None:
         """The tick timer: every tick due by the schedule (TickSchedule.run_due: a late
         callback, as each spin costs Python time, still keeps real_time_factor). In
-        lockstep, where the commands tick: the time on /clock (paused: the held state)."""
-        if self.core.config.values["lockstep"] and self.on_tick() is None:
-            self._publish_clock()       # the time while lockstep waits (use_sim_time peers)
+        lockstep, where the answers tick: the time on /clock (or lockstep_wait's tick), and
+        the state awaiting its answer again where it may not have reached a controller
+        (schedule.Lockstep.resend)."""
+        if self.core.config.values["lockstep"]:
+            self._publish_lockstep()      # a play or a reset made one
+            idle = self.on_tick() is None
+            if idle:
+                self._publish_clock()     # the time while lockstep waits (use_sim_time peers)
+            if idle and self.core.lockstep.resend(
+                    self.joint_state_publisher.get_subscription_count(), self.core.wall_clock()):
+                self._publish_states(self.core.joint_state())
+            if idle:
+                self.core.recorder.idle()
         self.schedule.run_due(self.core, self.on_tick)
 
     def on_tick(self) -> JointStateData | None:
@@ -160,10 +181,19 @@ class ArmSimNode(Node):
             self._publish(data)
         return data
 
-    def _publish(self, data: JointStateData, clock_after: float = 0.0) -> None:
-        """joint_states and /clock; with sensors, the readings there and the state on
-        ~/true_joint_states at the same stamp. /clock `clock_after` s after the state (a
-        lockstep tick's STATE_BEFORE_CLOCK)."""
+    def _publish(self, data: JointStateData) -> None:
+        """joint_states (_publish_states), then /clock."""
+        self._publish_states(data)
+        if self.core.config.values["publish_clock"]:
+            if self.serialized:
+                self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
+            else:
+                self.clock_message.clock = _stamp(data.stamp_ns)
+                self.clock_publisher.publish(self.clock_message)
+
+    def _publish_states(self, data: JointStateData) -> None:
+        """joint_states; with sensors, the readings there and the state on
+        ~/true_joint_states at the same stamp."""
         self._publish_state(self.joint_state_publisher, data, self.joint_state_message)
         if data.truth is not None:
             if self.truth_publisher is None:
@@ -171,14 +201,6 @@ class ArmSimNode(Node):
                     JointState, TRUE_JOINT_STATES_TOPIC, 10)
                 self.truth_message = JointState()
             self._publish_state(self.truth_publisher, data.truth, self.truth_message)
-        if self.core.config.values["publish_clock"]:
-            if clock_after:               # the state first (STATE_BEFORE_CLOCK)
-                time.sleep(clock_after)
-            if self.serialized:
-                self.clock_publisher.publish(clock_cdr(*split_stamp(data.stamp_ns)))
-            else:
-                self.clock_message.clock = _stamp(data.stamp_ns)
-                self.clock_publisher.publish(self.clock_message)
 
     def _publish_state(self, publisher, data: JointStateData, message: JointState) -> None:
         """`data` as the RMW's own bytes (cdr.py) where it writes them, else in `message`."""
@@ -228,7 +250,8 @@ class ArmSimNode(Node):
             return SetParametersResult(successful=False, reason=could_not_apply(changes, error))
         if {"publish_rate", "real_time_factor"} & set(changed):      # the wall period
             self.destroy_timer(self.tick_timer)
-            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer)
+            self.tick_timer = self.create_timer(self.core.config.wall_period, self.on_timer,
+                                                callback_group=self.loop_group)
         return SetParametersResult(successful=True)
 
     def destroy_node(self):
@@ -247,8 +270,6 @@ def run(ros_args: list, duration: float | None, status) -> int:
         while rclpy.ok() and (end_ns is None or
                               node.core.stamp_ns() - node.core.start_stamp_ns < end_ns):
             rclpy.spin_once(node, timeout_sec=0.1)
-        if status is not None:
-            status(node.core.status_line(node.core.real_time_factor(node.core.wall_clock())))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -16,8 +16,9 @@ import sys
 from dataclasses import dataclass, field
 from xml.sax.saxutils import escape, quoteattr
 
-from .one_cyclone import refuse_foreign_cyclone
+from .one_cyclone import refuse_foreign_cyclone, require_cyclonedds
 
+require_cyclonedds()        # what to install, not a ModuleNotFoundError (colcon installs)
 refuse_foreign_cyclone()    # before cyclonedds loads (and binds) its C library
 
 from cyclonedds.core import DDSException  # noqa: E402

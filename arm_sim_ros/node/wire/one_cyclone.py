@@ -15,7 +15,32 @@ import ctypes
 import importlib.util
 import os
 
+from ...usage import UsageError
 from .errors import DiscoveryError
+
+# setup.py's pin of the cyclonedds package (a test checks that they agree): what to install
+# where it is missing (a colcon build installs what rosdep supplies, and rosdep has no key
+# for the PyPI package).
+CYCLONEDDS = "cyclonedds==11.0.1"
+
+
+class CycloneMissing(UsageError):
+    """The dds transport without the cyclonedds package: one line saying what to install."""
+
+
+def require_cyclonedds(what: str | None = None) -> None:
+    """CycloneMissing where the cyclonedds package cannot be imported; call before the first
+    import of it (`what`: the command), so that the person reads what to install, not a
+    ModuleNotFoundError."""
+    try:
+        missing = importlib.util.find_spec("cyclonedds") is None
+    except (ImportError, ValueError):       # a broken install: as good as missing
+        missing = True
+    if missing:
+        who = f"{what} runs on the dds transport, which needs" if what else \
+            "the dds transport needs"
+        raise CycloneMissing(f"{who} the cyclonedds package, not installed here (a colcon "
+                             f"build does not install it): pip install {CYCLONEDDS}")
 
 
 class _DlInfo(ctypes.Structure):

@@ -162,13 +162,16 @@ class Kernel:
         """Forget the books the arrays hold (Python's objects were put back: WholeSteps)."""
         self.held = None
 
-    def commanded(self, sim) -> bool:
-        """A new command while the books are held: the next step is checked, as
-        set_command does (True); a switching scene's books are settled, its clamps' modes
-        being Python's to find again (False)."""
+    def commanded(self, sim, answered: bool) -> bool:
+        """A new command (`answered`: a new torque) while the books are held, taken in the
+        arrays where they can (True): with the estimate off there is nothing to take (no
+        check, no shadow); with it, the next step is checked, as set_command does, unless a
+        new torque asks the shadow (shadow.answered: Python's). Else the books are settled
+        (False), a switching scene's too, its clamps' modes being Python's to find again."""
         if self.held is None:
             return False
-        if self.held[0] is not self.module.run_books:
+        if self.held[0] is not self.module.run_books or (
+                answered and not isinstance(self.held[3], Off)):
             self.settle(sim)
             return False
         if not isinstance(self.held[3], Off):

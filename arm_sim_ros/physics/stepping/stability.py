@@ -223,14 +223,19 @@ def exact_substeps(effects, arm: ArmParameters, h: float) -> int:
     return MAX_SUBSTEPS + 1
 
 
-def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float):
+def plan(tableau: ButcherTableau, effects, arm: ArmParameters, h: float, whole: bool = False):
     """(ratio, limit, sub-steps, what to tell a person or None): the
     sub-steps that keep the stiff effects stable at every elbow angle (1 = plain steps).
     Damping alone has real eigenvalues (the real-axis limit); springs and windings
     oscillate, so their bound |lambda| is kept inside the half-disk. An adaptive method
-    controls its own error and sub-steps by itself."""
+    controls its own error and sub-steps by itself. `whole` (a scene's stability_plan
+    off, a stability study): no sub-steps, and the message says the steps may diverge."""
     ratio, limit, substeps, what = planned(tableau, effects, arm, h)
     message = None
+    if substeps > 1 and whole:
+        return ratio, limit, 1, (f"{what} = {ratio:.4g} ({stiff_names(effects, arm)}) exceeds "
+                                 f"{tableau.name}'s stability limit {limit:.4g}; "
+                                 "stability_plan off: each step is taken whole and may diverge")
     if substeps > 1:
         stiff = stiff_names(effects, arm)
         message = (f"{what} = {ratio:.4g} ({stiff}) exceeds {tableau.name}'s stability limit "

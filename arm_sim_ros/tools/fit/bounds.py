@@ -17,7 +17,10 @@ Bounds, each stated in the output:
 
 Verdict (`explains`): the fitted simulation stays within EXPLAINED x the noise (RMS, per
 channel) on the held-out validation and over the training (χ² per residual within
-EXPLAINED²); a fit that converged to a model that does not is exit code 3.
+EXPLAINED²); a fit that converged to a model that does not is exit code 3. The noise is
+never taken below the replay's resolution (problem.noise_level: a fraction of what the
+signal changes in a sample interval), and a recording that moves nowhere beyond EXPLAINED x
+its noise, which a still arm would pass, gets no verdict: it identifies nothing (stats.py).
 """
 from __future__ import annotations
 
@@ -35,8 +38,9 @@ MAX_JACOBIAN_BYTES = 2 ** 30    # the dense Jacobian of the training problem
 DEFAULT_SECONDS = 900.0         # wall time of a whole fit (--max-seconds)
 EXPLAINED = 2.0                 # RMS error in units of the noise, every channel
 # exit codes (usage.py): the model explains the recording, a bound reached before it
-# converged, converged but the model misses the recording
+# converged or a key the recording cannot identify, converged but the model misses it
 EXPLAINED_CODE, STOPPED_CODE, UNEXPLAINED_CODE = DONE, FAULT, UNEXPLAINED
+UNIDENTIFIED_CODE = FAULT
 CHANNELS = ("q1", "q2", "qd1", "qd2")
 
 
@@ -103,8 +107,9 @@ def verdict(outcome: dict) -> dict:
     where = "training" if worst == training else f"validation {CHANNELS[held.index(worst)]}"
     return {"explains": bool(worst <= EXPLAINED), "worst_noise_multiple": worst,
             "where": where,
-            "rule": f"the fitted simulation within {EXPLAINED:g} x the noise (RMS) on every "
-                    "channel of the held-out validation and over the training"}
+            "rule": f"the fitted simulation within {EXPLAINED:g} x the noise (RMS; at least "
+                    "the replay's resolution) on every channel of the held-out validation "
+                    "and over the training"}
 
 
 def bounds(args) -> dict:

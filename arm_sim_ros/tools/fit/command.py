@@ -15,9 +15,10 @@ evaluations per start, wall time) and says why it stopped; its verdict says whet
 fitted model explains the recording (within 2 x the noise on every channel).
 
 Exit codes: 0 the fitted model explains the recording, 1 a bound was reached before the
-fit converged (one line: why, and the best point found), 2 bad input (one line), 3 the fit
-converged but the model does not explain the recording (the outputs are written, the
-verdict says by how much: the base scene lacks something the arm has).
+fit converged (one line: why, and the best point found) or the recording cannot identify a
+free key (one line: which, and why; stats.py), 2 bad input (one line), 3 the fit converged
+but the model does not explain the recording (the outputs are written, the verdict says by
+how much: the base scene lacks something the arm has).
 """
 from __future__ import annotations
 
@@ -36,9 +37,11 @@ from . import bounds as b
 from .data import FitError, read_recording
 from .keys import check_free, parse_free, with_values
 from .problem import SEGMENT_SECONDS, VALIDATION_FRACTION, Problem, fit_from, starts
-from .stats import uncertainty, validate, warnings_for
+from .stats import Unidentified, check_motion, unidentified, uncertainty, validate, warnings_for
 
 CONNECT_SECONDS = 10.0      # a --scheduler that has not answered by then is given up
+# setup.py's extra `fit` (a test checks that they agree): what --scheduler needs
+FIT_EXTRA = ("dask==2026.8.0", "distributed==2026.8.0")
 CONNECT_GRACE = 5.0         # then Client's own timeout may still say why (refused, not Dask)
 
 
@@ -104,6 +107,8 @@ def checked_args(args) -> tuple:
     for k, path in enumerate(paths):
         if path in paths[:k]:
             raise FitError(f"{args.bags[k]} is given twice: a recording counts once")
+    if args.scheduler:
+        dask_client()                      # before anything is read or fitted
     cpus = os.cpu_count() or 1
     if args.workers > cpus and not args.scheduler:
         print(f"arm-sim: --workers {args.workers}: {cpus} processes, one per CPU",
@@ -125,6 +130,11 @@ def cmd_fit(args) -> int:
     mode = "commands" if args.torque_topic else "effort"
     problem = Problem(base, free, recordings, mode, args.segment, args.validation)
     b.check_size(problem)
+    try:
+        check_motion(problem)
+    except Unidentified as nothing:
+        print(f"arm-sim: error: {nothing}", file=sys.stderr)
+        return b.UNIDENTIFIED_CODE
     points = starts(len(free), args.starts)
     # Every start on every recording alone, in parallel; several recordings are then
     # fitted together from the median of their own fits (one more start, near the optimum).
@@ -148,7 +158,11 @@ def cmd_fit(args) -> int:
               f"{b.stopped(best, args.max_evaluations, args.max_seconds)} before it converged, "
               f"from each of {len(points)} starts; best point: {point}", file=sys.stderr)
         return b.STOPPED_CODE
-    outcome = summarise(problem, results, names, deadline)
+    try:
+        outcome = summarise(problem, results, names, deadline)
+    except Unidentified as unknown:
+        print(f"arm-sim: error: {unknown}", file=sys.stderr)
+        return b.UNIDENTIFIED_CODE
     outcome["start_count"] = len(points)
     outcome["recordings"] = [{"source": r.source, "values": problem.values(best["xp"]).tolist(),
                               "converged": best["status"] > 0}
@@ -178,8 +192,8 @@ def run_tasks(function, tasks, workers: int, scheduler: str | None, deadline: fl
     same wherever they run; each stops at `deadline` (time.time()) by itself, and a cluster
     that has returned nothing by then is given up (Stopped)."""
     if scheduler:
-        from distributed import wait
         with connected(scheduler) as client:
+            from distributed import wait
             futures = [client.submit(function, *task, pure=False) for task in tasks]
             try:
                 wait(futures, timeout=max(1.0, deadline - time.time() + CONNECT_SECONDS))
@@ -196,14 +210,22 @@ def run_tasks(function, tasks, workers: int, scheduler: str | None, deadline: fl
         return list(pool.map(function, *zip(*tasks)))
 
 
+def dask_client():
+    """distributed.Client, or FitError naming the extra that installs it."""
+    try:
+        from distributed import Client
+    except ImportError as error:
+        raise FitError(f"--scheduler needs dask.distributed, which does not import here "
+                       f"({error}): pip install 'arm_sim_ros[fit]' (the extra fit: "
+                       f"{' '.join(FIT_EXTRA)})") from None
+    return Client
+
+
 def connected(scheduler: str):
     """A Dask client of `scheduler`, or FitError in one line: no Dask, nobody there, not a
     Dask scheduler (an HTTP port answers nonsense), or silent past CONNECT_SECONDS (Client's
     own timeout does not cover a server that accepts and says nothing)."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise FitError("--scheduler needs Dask: pip install 'arm_sim_ros[fit]'") from None
+    Client = dask_client()
     import threading
 
     made = []
@@ -230,7 +252,8 @@ def connected(scheduler: str):
 
 
 def summarise(problem: Problem, results, names, deadline=None) -> dict:
-    """The best start, its uncertainties, warnings and validation, as plain data."""
+    """The best start, its uncertainties, warnings and validation, as plain data; or
+    Unidentified, naming the free keys the fitted simulation shows nothing of."""
     best = min(range(len(results)), key=lambda i: results[i]["cost"])
     r = results[best]
     xp, states = r["xp"], r["states"]
@@ -243,9 +266,15 @@ def summarise(problem: Problem, results, names, deadline=None) -> dict:
     values[problem.sensing] = problem.values(xp)[problem.sensing]   # delays: not rounded
     se = stats["se"] * problem.scale
     runs = problem.simulate(xp, states, problem.training)
+    unknown = unidentified(problem, stats["moved"], runs, names)
+    if unknown:
+        rest = [f"{p.key} = {v:.6g}" for i, (p, v) in enumerate(zip(problem.free, values))
+                if i not in unknown]
+        raise Unidentified("the recording cannot identify " + "; ".join(unknown.values())
+                           + (f"; fitted beside: {', '.join(rest)}" if rest else "")
+                           + "; free only keys it identifies")
     chi2 = 2 * r["cost"] / r["residuals"]
-    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], runs,
-                            names, chi2)
+    warnings = warnings_for(problem, values, se, stats["correlation"], stats["moved"], chi2)
     errors = np.vstack([run - problem.measured(g) for run, g in zip(runs, problem.training)])
     start = problem.values(np.ones(problem.n_parameters))
     return {

@@ -15,7 +15,8 @@ the same schedule as a CSV (t, tau1, tau2) for its controller to play, and the r
 of that run is what to fit.
 
 Exit codes: 0 written; 1 the run cannot be a recording to fit (the simulation faulted: the
-bag is removed; a joint never moved: the bag is kept, the line says why); 2 bad input (one
+bag is removed; a joint never moved, or its recorded readings show none of its motion as a
+fit reads them, beyond their noise: the bag is kept, the line says why); 2 bad input (one
 line), such as a scene whose servos follow set-points and ignore the torque.
 """
 from __future__ import annotations
@@ -29,7 +30,7 @@ from ...interface import FLOAT64_MULTI_ARRAY, JOINT_NAMES, JOINT_STATE
 from ...outputs import check_output, clear_output, write_text
 from ...physics.scene import parse_value
 from ..arguments import add_scene_arguments, scene_from_args
-from .data import FitError
+from .data import FitError, Recording
 
 BAND = (0.1, 2.0)          # Hz
 DEFAULT_PEAK = (5.0, 2.0)  # N m, without effort limits
@@ -57,8 +58,8 @@ def multisine(duration: float, rate: float, peaks, band=BAND):
 
 def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), seed: int = 0):
     """Run the multi-sine through our Simulator and write the bag at `path`: (the
-    simulator, whether each joint moved). It stops at a refused step (the simulator's fault
-    says why: the caller removes the bag)."""
+    simulator, whether each joint moved, the Recording written: what a fit reads). It stops
+    at a refused step (the simulator's fault says why: the caller removes the bag)."""
     from ...physics.simulator import Simulator
     from ...recording.bags.bag import BagWriter, joint_state, torque_command
 
@@ -67,7 +68,7 @@ def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), s
     policy = scene.policy if scene.policy.startswith("command") else "command"
     sim = Simulator(scene.replace(policy=policy, step_size=1.0 / (rate * substeps)))
     rng = np.random.default_rng(seed)
-    start, moved = sim.state[:2], [False, False]
+    start, moved, written = sim.state[:2], [False, False], []
     with BagWriter(path) as bag:
         bag.add_topic("/joint_states", JOINT_STATE)
         bag.add_topic("/joint_torque_commands", FLOAT64_MULTI_ARRAY)
@@ -79,13 +80,32 @@ def record(scene, path, duration: float, rate: float, peaks, noise=(0.0, 0.0), s
             q = np.array(read[:2]) + rng.normal(0.0, noise[0], 2) if noise[0] else read[:2]
             qd = np.array(read[2:]) + rng.normal(0.0, noise[1], 2) if noise[1] else read[2:]
             bag.write("/joint_states", ns, joint_state(ns, q, qd, sim.joint_torque()))
+            written.append((t[k], *q, *qd, *sim.joint_torque()))
             bag.write("/joint_torque_commands", ns, torque_command((t1, t2)))
             for _ in range(substeps):
                 sim.step()
             if sim.fault is not None:
                 break
             moved = [m or q != q0 for m, q, q0 in zip(moved, sim.state[:2], start)]
-    return sim, moved
+    rows = np.array(written, dtype=float).reshape(-1, 7)
+    return sim, moved, Recording(str(path), rows[:, 0], rows[:, 1:3], rows[:, 3:5], rows[:, 5:])
+
+
+def unread(recording) -> list[int]:
+    """The joints whose recorded readings (position and velocity) move nowhere beyond
+    EXPLAINED x their noise, as `arm-sim fit` reads them (stats.motion): a fit learns
+    nothing of them, whatever the truth did (a sensor delay longer than the run, a
+    resolution or a noise coarser than the motion). Fewer samples than a fit reads are not
+    judged: the fit refuses them itself, and their 4th differences tell no noise."""
+    from .bounds import EXPLAINED
+    from .data import MIN_SAMPLES
+    from .problem import noise_level
+    from .stats import motion
+
+    if len(recording) < MIN_SAMPLES:
+        return []
+    moves = motion(recording, noise_level(recording))
+    return [j for j in (0, 1) if not max(moves[j], moves[2 + j]) > EXPLAINED]
 
 
 def add_parser(subparsers) -> None:
@@ -140,7 +160,7 @@ def cmd_excite(args) -> int:
         t, tau = multisine(duration, args.rate, peaks)
         write_text(torques, "t,tau1,tau2\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in
                                                      zip(t.tolist(), *tau.T.tolist())), "--torques")
-    sim, moved = record(scene, bag, duration, args.rate, peaks, noise, args.seed)
+    sim, moved, written = record(scene, bag, duration, args.rate, peaks, noise, args.seed)
     if sim.fault is not None:
         clear_output(bag)
         print(f"arm-sim: error: the simulation faulted, so no recording was written: "
@@ -150,9 +170,13 @@ def cmd_excite(args) -> int:
     print(f"wrote {bag}: {duration:g} s of a multi-sine at {args.rate:g} Hz, peaks "
           f"{peaks[0]:g}, {peaks[1]:g} N m; final q = ({sim.state[0]:.4f}, {sim.state[1]:.4f}) rad")
     still = [name for name, m in zip(JOINT_NAMES, moved) if not m]
-    if still:
-        print(f"arm-sim: error: {' and '.join(still)} never moved in {bag}: a fit learns "
-              "nothing of it (static friction or a limit holds it? raise --peak)",
-              file=sys.stderr)
+    blind = [JOINT_NAMES[j] for j in unread(written) if moved[j]]
+    said = ([f"{' and '.join(still)} never moved in {bag} (static friction or a limit holds "
+             "it? raise --peak)"] if still else []) + (
+        [f"the readings of {' and '.join(blind)} in {bag} show no motion beyond their noise "
+         "(a sensors.delay longer than the run? a resolution or --noise coarser than the "
+         "motion?)"] if blind else [])
+    if said:
+        print(f"arm-sim: error: {'; '.join(said)}: a fit learns nothing of it", file=sys.stderr)
         return 1
     return 0

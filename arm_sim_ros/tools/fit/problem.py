@@ -12,8 +12,9 @@ holds a command), with the scene's own exact stick-slip friction and limits, at 
 step (tolerance 0: no adaptive sub-steps, so the trajectory is a smooth function of the
 parameters between switches and finite differences are reproducible), and with no error
 estimate (estimate off: no shadow, no checks, which a rollout would only pay for). Residuals are
-(simulated - measured) / σ per channel, σ each channel's noise estimated from the data
-(noise_level), so the cost is a χ² and ~1 per residual at the noise level.
+(simulated - measured) / σ per channel, σ each channel's noise estimated from the data, at
+least the replay's resolution (noise_level), so the cost is a χ² and ~1 per residual at the
+noise level.
 
 A recording made with sensors is compared through their deterministic parts (observe.py):
 the simulated truth delayed, offset and differenced as the readings were, and the commands
@@ -43,17 +44,28 @@ SEGMENT_SECONDS = 1.0
 VALIDATION_FRACTION = 0.2
 PARAMETER_STEP = 1e-6     # finite-difference step of a scaled parameter (relative)
 STATE_STEP = 1e-4         # ... of a start state, in units of the channel's noise
-NOISE_FLOOR = 1e-9        # rad, rad/s: the σ of a noiseless recording
+NOISE_FLOOR = 1e-9        # rad, rad/s: the σ of a still, noiseless recording
+# The replay holds each torque over its sample interval and moves a delay within one by
+# interpolants (observe.py), so it reproduces a motion only to a share of what a channel
+# changes over one interval: up to 2.2e-3 of it (RMS) measured with an exact velocity and
+# a 1.5-sample command delay. Below this share a residual is the replay's, not the arm's.
+REPLAY_RESOLUTION = 5e-3
 FAILED = 1e6              # residual of a parameter set the scene refuses
 
 
 def noise_level(recording) -> np.ndarray:
-    """σ of q1, q2, qd1, qd2: the robust spread (median absolute deviation) of 4th
-    differences, which remove a smooth signal and leave white noise x sqrt(70)."""
+    """σ of q1, q2, qd1, qd2, by which residuals are weighed: the noise, the robust spread
+    (median absolute deviation) of 4th differences, which remove a smooth signal and leave
+    white noise x sqrt(70); but never below the replay's resolution, REPLAY_RESOLUTION of
+    the channel's RMS change over a sample interval (an exact channel's noise is the
+    replay's error, which 4th differences cannot see)."""
     x = np.hstack([recording.q, recording.qd])
     fourth = np.diff(x, n=4, axis=0)
-    mad = np.median(np.abs(fourth - np.median(fourth, axis=0)), axis=0)
-    return np.maximum(1.4826 * mad / np.sqrt(70.0), NOISE_FLOOR)
+    mad = np.median(np.abs(fourth - np.median(fourth, axis=0)), axis=0) if len(fourth) \
+        else np.zeros(4)                   # too short for it: excite at a low --rate
+    change = np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0)) if len(x) > 1 else np.zeros(4)
+    return np.maximum.reduce([1.4826 * mad / np.sqrt(70.0), REPLAY_RESOLUTION * change,
+                              np.full(4, NOISE_FLOOR)])
 
 
 def replay_scene(base, mode: str, recording):

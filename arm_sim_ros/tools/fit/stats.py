@@ -5,12 +5,17 @@ Covariance of the scaled unknowns (parameters and segment start states together)
 s² (JᵀJ)⁻¹ from the Jacobian J at the optimum, s² = Σr² / (m − n) the residual variance;
 a parameter's standard error is its diagonal entry's root times its scale, the start
 states marginalised out. A parameter whose column of J is (next to) zero does not move the
-simulated trajectory at all: it is reported without a standard error and warned about.
+simulated trajectory at all, and a breakaway friction of a joint that never stuck acts
+nowhere: the recording cannot identify them (Unidentified, exit code 1, one line). Nor can a
+recording that moves nowhere beyond its noise identify anything: a still arm would pass the
+verdict on it (white noise counts as all noise), so no value is told from another; it is
+refused before the fit (check_motion).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .bounds import CHANNELS, EXPLAINED
 from .problem import Problem, solve
 
 UNMOVED = 1e-9            # a column this small against the largest: the data ignore it
@@ -38,23 +43,58 @@ def uncertainty(jac: np.ndarray, residuals: np.ndarray, n: int) -> dict:
             "moved": moved[:n]}
 
 
-def warnings_for(problem: Problem, values, se, correlation, moved, runs, names,
-                 chi2: float) -> list[str]:
-    """One line per parameter the recording does not identify, per pair it cannot tell
+class Unidentified(Exception):
+    """The recording cannot identify a free key: which, and why (exit code 1, one line)."""
+
+
+def motion(recording, sigma) -> np.ndarray:
+    """How far q1, q2, qd1, qd2 move, in units of their σ: the positions' spread about
+    their mean, the velocities' RMS (a still arm's velocity is zero)."""
+    spread = np.concatenate([np.std(recording.q, axis=0),
+                             np.sqrt(np.mean(recording.qd ** 2, axis=0))])
+    return spread / sigma
+
+
+def check_motion(problem: Problem) -> None:
+    """Unidentified where a recording moves on no channel beyond EXPLAINED x its σ: a still
+    arm would pass the verdict there, so the recording cannot tell one value of a key from
+    another (white noise, whose 4th differences are as large as it, or a still arm)."""
+    keys = ", ".join(p.key for p in problem.free)
+    for recording, sigma in zip(problem.recordings, problem.sigma):
+        moves = motion(recording, sigma)
+        if not moves.max() > EXPLAINED:
+            raise Unidentified(
+                f"{recording.source} cannot identify {keys}: nothing in it moves beyond its "
+                f"noise ({', '.join(CHANNELS)} vary by "
+                f"{', '.join(f'{m:.3g}' for m in moves)} x the noise their 4th differences "
+                "show: white noise or a still arm), so every value fits it as well; record a "
+                "motion (arm-sim excite)")
+
+
+def unidentified(problem: Problem, moved, runs, names) -> dict[int, str]:
+    """{index: 'key (why)'} of each free key the fitted simulation shows nothing of: its
+    motion does not depend on the key, or the key is the breakaway friction of a joint that
+    never stuck."""
+    found = {}
+    for i, p in enumerate(problem.free):
+        joint = names[p.index] if p.index is not None else "either joint"
+        if p.field == "friction" and p.name == "static" and not stuck(runs, p.index):
+            found[i] = (f"{p.key} (the {joint} never stuck: record motions that stop and "
+                        "start again)")
+        elif not moved[i]:
+            found[i] = f"{p.key} (the simulated motion does not depend on it)"
+    return found
+
+
+def warnings_for(problem: Problem, values, se, correlation, moved, chi2: float) -> list[str]:
+    """One line per parameter the recording barely identifies, per pair it cannot tell
     apart, and one if the best fit still misses the recording by more than its noise."""
     lines = []
     if chi2 > MISFIT:
         lines.append(f"the fitted simulation misses the recording by {chi2 ** 0.5:.3g} x its "
                      "noise (RMS): the base scene lacks something the arm has; free more keys")
     for i, p in enumerate(problem.free):
-        joint = names[p.index] if p.index is not None else "either joint"
-        if p.field == "friction" and p.name == "static" and not stuck(runs, p.index):
-            lines.append(f"{p.key}: the {joint} never stuck; not identifiable from this "
-                         "recording (record motions that stop and start again)")
-        elif not moved[i]:
-            lines.append(f"{p.key}: the simulated motion does not depend on it; not "
-                         "identifiable from this recording")
-        elif not se[i] <= LOOSE * max(abs(values[i]), p.typical * 1e-3):
+        if moved[i] and not se[i] <= LOOSE * max(abs(values[i]), p.typical * 1e-3):
             lines.append(f"{p.key}: ± {se[i]:.3g} {p.unit} on {values[i]:.4g}; barely "
                          "identifiable from this recording (excite what it acts on more)")
     n = len(problem.free)

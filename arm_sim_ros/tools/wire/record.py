@@ -234,6 +234,9 @@ def cmd_record(args) -> int:
 
     from math import isfinite
 
+    from ...node.wire.one_cyclone import require_cyclonedds
+
+    require_cyclonedds("arm-sim record")
     from ...recording.bags.bag import BagError
     from ...node.wire.messages import make_participant
     from ...outputs import clear_output

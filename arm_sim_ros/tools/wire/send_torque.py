@@ -3,6 +3,11 @@ way `ros2 topic pub` would where ROS 2 is installed.
 
 The node drops a command that is not repeated within its command_timeout, so by default the
 command is repeated at --rate until Ctrl-C or --duration; --once sends it one time.
+
+A node that refuses the commands (beyond its torque_limit) says so on /diagnostics, once a
+second: its refused_commands count and why (last_refusal). The sender reads it (Refusals):
+the count before it sends, then while it sends, and once after, until the node has taken
+what was sent. A count that rose ends the sending: one line saying why, exit code 1.
 """
 from __future__ import annotations
 
@@ -10,11 +15,13 @@ import sys
 import time
 from math import isfinite
 
-from ...interface import COMMAND_TOPIC, FLOAT64_MULTI_ARRAY, wrong_type
+from ...interface import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, FLOAT64_MULTI_ARRAY, wrong_type
+from ...node.commands.intake import COMMAND_POLICIES
 from ...usage import UsageError
 
 
 WAIT = 30.0     # a node started at the same time, or after, on a loaded machine: found
+DIAGNOSTICS_WAIT = 2.5   # s: the node publishes /diagnostics once a wall second
 
 
 def add_parser(subparsers) -> None:
@@ -49,6 +56,9 @@ def cmd_send_torque(args) -> int:
     if bad:              # the node would refuse it: said here, before joining the network
         raise UsageError(f"send-torque {' '.join(f'{t:g}' for t in args.torques)}: "
                          f"{', '.join(bad)} is not a torque (finite N m)")
+    from ...node.wire.one_cyclone import require_cyclonedds
+
+    require_cyclonedds("arm-sim send-torque")
     from ...node.wire.messages import check_topic_name
 
     check_topic_name(args.topic, "--topic")   # before joining the network
@@ -66,14 +76,88 @@ def cmd_send_torque(args) -> int:
               file=sys.stderr)
         return 1
     torques = list(args.torques)
+    publisher.refusals.first_count(DIAGNOSTICS_WAIT)
     if args.once:
         publisher.send(torques)
+        refused = publisher.refusals.after(1, DIAGNOSTICS_WAIT)
+    else:
+        print(f"sending {torques} N m at {args.rate:g} Hz" +
+              (f" for {args.duration:g} s" if args.duration is not None else "; Ctrl-C stops"),
+              flush=True)
+        refused = publisher.repeat(torques, args.rate, args.duration)
+    if refused:
+        print(f"arm-sim: error: {refused}", file=sys.stderr)
+        return 1
+    if args.once:
         print(f"sent {torques} N m once")
-        return 0
-    print(f"sending {torques} N m at {args.rate:g} Hz" +
-          (f" for {args.duration:g} s" if args.duration is not None else "; Ctrl-C stops"))
-    publisher.repeat(torques, args.rate, args.duration)
     return 0
+
+
+class Refusals:
+    """What the arm_sim nodes on /diagnostics say of the commands they refused: each node's
+    refused_commands and received_commands counts when first read (the count before), the
+    latest, and why the latest refused command was (last_refusal)."""
+
+    def __init__(self, participant, msg):
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        self.first, self.latest = {}, {}
+        self.reader = DataReader(participant, Topic(participant, msg.ros_topic(
+            DIAGNOSTICS_TOPIC), msg.DiagnosticArray), qos=msg.default_qos(msg.DiagnosticArray))
+
+    def read(self) -> int:
+        """Take what arrived; how many statuses with the counts did."""
+        found = 0
+        for sample in self.reader.take(N=1000):
+            for status in getattr(sample, "status", ()):
+                values = {kv.key: kv.value for kv in status.values}
+                try:
+                    counts = (int(values["refused_commands"]), int(values["received_commands"]))
+                except (KeyError, ValueError):
+                    continue            # not an arm_sim node's simulation status
+                key = (status.hardware_id, status.name)
+                self.first.setdefault(key, counts)
+                self.latest[key] = (*counts, values.get("last_refusal", "none"),
+                                    values.get("policy", "command"))
+                found += 1
+        return found
+
+    def first_count(self, timeout: float) -> bool:
+        """The counts before anything is sent: wait up to `timeout` s for a first status
+        (none: a subscriber that is no arm_sim node, whose refusals cannot be read)."""
+        deadline = time.monotonic() + timeout
+        while not self.first and time.monotonic() < deadline:
+            self.read()
+            time.sleep(0.02)
+        return bool(self.first)
+
+    def refused(self, sent: int) -> str | None:
+        """Why, if a node's refused count rose since the first read, or its policy ignores
+        torque commands: the line to say."""
+        for key, (refused, _, why, policy) in self.latest.items():
+            rose = refused - self.first[key][0]
+            if rose > 0:
+                return (f"the node refused {min(rose, sent)} of the {sent} commands sent: {why} "
+                        f"(its /diagnostics refused_commands rose from {self.first[key][0]} "
+                        f"to {refused})")
+            if policy not in COMMAND_POLICIES:
+                return (f"the node's policy {policy!r} ignores torque commands (its "
+                        "/diagnostics say so): set its policy to command, e.g. `ros2 param "
+                        "set /arm_sim policy command`")
+        return None
+
+    def after(self, sent: int, timeout: float) -> str | None:
+        """Once all is sent: wait (up to `timeout` s) until every node's status says it has
+        received what was sent since the first read, then whether it refused any."""
+        deadline = time.monotonic() + timeout
+        while self.first and time.monotonic() < deadline:
+            self.read()
+            if all(received - self.first[key][1] >= sent
+                   for key, (_, received, *_) in self.latest.items()) and self.latest:
+                break
+            time.sleep(0.02)
+        return self.refused(sent)
 
 
 class TorquePublisher:
@@ -94,6 +178,7 @@ class TorquePublisher:
         self.writer = DataWriter(
             self.participant, Topic(self.participant, self.topic, msg.Float64MultiArray),
             qos=msg.default_qos(msg.Float64MultiArray))
+        self.refusals = Refusals(self.participant, msg)     # read along with discovery
         # what discovery finds meanwhile, to name a type that stops a match (other_types)
         self._endpoints = [(reader, ReadCondition(reader, InstanceState.Alive)) for reader in (
             BuiltinDataReader(self.participant, kind)
@@ -120,18 +205,21 @@ class TorquePublisher:
         if acknowledged:
             self.writer.wait_for_acks(self._seconds(1.0))  # delivered before we exit
 
-    def repeat(self, torques, rate: float, duration: float | None) -> None:
+    def repeat(self, torques, rate: float, duration: float | None) -> str | None:
         """At `rate` until `duration` s (wall) have passed: each message written on its
         schedule (waiting for acknowledgements at each held the rate near 10 Hz), the last
-        acknowledged."""
+        acknowledged. Stops early where the node's diagnostics say it refuses them: why."""
         start, sent = time.monotonic(), 0
         try:
             while duration is None or sent / rate < duration:
                 self.send(torques, acknowledged=False)
                 sent += 1
+                if self.refusals.read() and (refused := self.refusals.refused(sent)):
+                    return refused
                 time.sleep(max(0.0, start + sent / rate - time.monotonic()))
         finally:
             self.writer.wait_for_acks(self._seconds(1.0))   # delivered before we exit
+        return self.refusals.after(sent, DIAGNOSTICS_WAIT)
 
     @staticmethod
     def _seconds(s: float) -> int:
