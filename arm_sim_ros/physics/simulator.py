@@ -14,6 +14,7 @@ and reported once, the first time, as a `saturation` event.
 from __future__ import annotations
 
 from collections import Counter, deque
+from functools import partial
 from math import inf, isfinite, nan
 
 from .trust import accuracy, guard
@@ -25,6 +26,7 @@ from .dynamics import book_entries, build_dynamics
 from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
+from .stepping.generated import shared
 from .scene import Scene
 from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle
@@ -236,10 +238,13 @@ class Simulator:
 def code_of(scene: Scene, command=None) -> tuple:
     """(dynamics, step): the scene's generated right-hand side and its method's step, the
     text the compiled path compiles (arm-sim inspect --source prints it)."""
-    dynamics = build_dynamics(scene, command)
-    step = step_for(INTEGRATORS[scene.method], len(dynamics.channels), dynamics.decay,
-                    rtol=scene.rtol, atol=scene.atol)
-    return dynamics, step
+    dynamics, tableau = build_dynamics(scene, command), INTEGRATORS[scene.method]
+    made = partial(step_for, tableau, len(dynamics.channels), dynamics.decay, rtol=scene.rtol,
+                   atol=scene.atol)
+    # a fixed step is a pure function, one per method and state (an adaptive step keeps its
+    # last sizes: its own)
+    return dynamics, made() if tableau.adaptive else shared(
+        (scene.method, len(dynamics.channels), dynamics.decay), made)
 
 
 def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> None:

@@ -22,6 +22,8 @@ from fractions import Fraction
 from functools import lru_cache
 from math import exp, lcm, nan
 
+from .generated import source_code
+
 F = Fraction
 
 
@@ -205,13 +207,6 @@ def _final(tableau: ButcherTableau, channels: int, position_b, b, extra: int = 0
             for n, (x, k) in enumerate(zip(_state(extra, channels), _slopes(extra, channels)))]
 
 
-@lru_cache(maxsize=512)
-def source_code(source: str, name: str):
-    """compile(source, name) once per text: every simulator of a scene structure (a sweep
-    builds thousands) execs the same generated code."""
-    return compile(source, name, "exec")
-
-
 def _exec(source: str, name: str, namespace: dict):
     exec(source_code(source, name), namespace)
     return namespace
@@ -225,32 +220,16 @@ def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAU
     matter for embedded pairs."""
     if tableau.adaptive:
         return _compile_adaptive(tableau, channels, rtol, atol, extra)
-    source = fixed_step_source(tableau, channels, extra)
-    step = _exec(source, f"<{tableau.name} step, {extra} extra, {channels} channels>", {})["step"]
-    step.source = source
-    return step
-
-
-def fixed_step_source(tableau: ButcherTableau, channels: int, extra: int) -> str:
-    """The straight-line source of a fixed-step method's step(f, y, h), written once per
-    method and state in a process (keyed by the tableau itself: its hash sums fractions)."""
-    key = (id(tableau), channels, extra)
-    if key not in _FIXED:
-        _FIXED[key] = (tableau, _fixed_step_source(tableau, channels, extra))
-    return _FIXED[key][1]
-
-
-_FIXED: dict = {}      # (id of the tableau, channels, extra): (the tableau, its step's source)
-
-
-def _fixed_step_source(tableau: ButcherTableau, channels: int, extra: int) -> str:
     state = _state(extra, channels)
     lines = ["def step(f, y, h):", f"    {', '.join(state)}, = y"]
     lines += _stage_lines(tableau, channels, first_given=False, extra=extra)
     final = [_combination(x, w, terms)
              for w, x, terms in _final(tableau, channels, tableau.pos_b, tableau.b, extra)]
     lines.append(f"    return ({', '.join(final)},)")
-    return "\n".join(lines) + "\n"
+    source = "\n".join(lines) + "\n"
+    step = _exec(source, f"<{tableau.name} step, {extra} extra, {channels} channels>", {})["step"]
+    step.source = source
+    return step
 
 
 # Step-size controller (Hairer, Norsett & Wanner, II.4): safety factor and growth limits.
@@ -362,7 +341,6 @@ _EXP_STAGES = (("E2", ("A21",)), ("E2", ("A31", "A32")), ("E1", ("A41", None, "A
 _EXP_NAMES = ("E2", "E1", "A21", "A31", "A32", "A41", "A43", "B1", "B2", "B3", "B4")
 
 
-@lru_cache(maxsize=128)
 def exponential_step_source(channels: int, extra: int, name: str = "step") -> str:
     """The straight-line source of the exponential RK4 step (step(f, y, h); reads the
     decay rates LAM0, LAM1 ... and COEFFICIENTS = exponential_rk4 from its globals)."""
