@@ -1,7 +1,9 @@
 """YAML files as people write them: YAML 1.2 numbers, no aliases, one clear error line.
 
 PyYAML reads YAML 1.1, where `1e-3` (no dot) is text; YAML 1.2 and ROS 2's parameter
-parser read it as a number, and so do we. Anchors and aliases are refused outright: a
+parser read it as a number, and so do we. A bare word is a bool where ROS 2's parser
+(rcl_yaml_param_parser) reads one: YAML 1.1's yes/no/on/off/true/false, and y/n too, so a
+scene file and the node's parameters read `estimate: off` (or `n`) alike. Anchors and aliases are refused outright: a
 scene or parameter file never needs them, and a 700-byte alias bomb expands to gigabytes.
 """
 from __future__ import annotations
@@ -59,12 +61,16 @@ class _Loader(yaml.SafeLoader):
 
 
 _Loader.add_constructor("tag:yaml.org,2002:int", _Loader.construct_yaml_int)
+_Loader.bool_values = {**yaml.SafeLoader.bool_values, "y": True, "n": False}
 _Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
 for first in "-+.0123456789":
     _Loader.yaml_implicit_resolvers[first] = [
         (tag, regexp) for tag, regexp in _Loader.yaml_implicit_resolvers.get(first, [])
         if tag != "tag:yaml.org,2002:float"]
     _Loader.yaml_implicit_resolvers[first].insert(0, ("tag:yaml.org,2002:float", FLOAT_1_2))
+for first in "yYnN":       # rcl's words for a bool beyond YAML 1.1's (ros_args.TRUE, FALSE)
+    _Loader.yaml_implicit_resolvers.setdefault(first, []).append(
+        ("tag:yaml.org,2002:bool", re.compile(r"^(?:y|Y|n|N)$")))
 
 
 def loads(text: str, what: str):

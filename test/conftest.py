@@ -22,11 +22,21 @@ size and time) is taken before the first test and compared after the last, by th
 that runs the suite (not its xdist workers); any difference fails the run (exit 1) with the
 paths, whatever each test reported. Left out: what Python
 and pip keep there (byte code, numba's cache beside it, the venvs, *.egg-info) and pytest's
-own .pytest_cache. Hypothesis keeps its files in a temporary directory, not in .hypothesis/
+own .pytest_cache. scripts/test runs the suite from a copy of the checkout (the files git
+sees), so the checkout compared is that copy, where only the suite writes: what a person does
+in the checkout meanwhile (scripts/run, a guide's example, an edit) is no part of the run.
+
+No process of the suite compiles a kernel itself: numba keeps all a compile made for the
+life of the process (about 40 MB a scene structure, where a kernel loaded from the cache
+costs about 2 MB), which grew each xdist worker to gigabytes. build.load has a child process
+compile a kernel first met (physics/compiled/apart.py); a kernel function compiled in a
+process of the suite all the same fails the run, named. Each process's peak memory is said
+at the end. Hypothesis keeps its files in a temporary directory, not in .hypothesis/
 of the working directory, and draws the same examples every run (derandomize, no database):
 the suite is deterministic.
 """
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -38,6 +48,7 @@ from hypothesis import configuration, settings
 
 CHECKOUT = Path(__file__).resolve().parents[1]
 BEFORE, CHANGED = pytest.StashKey[dict](), pytest.StashKey[list]()
+PROCESSES = pytest.StashKey[dict]()      # {process: (peak MB, kernel functions compiled there)}
 _session = []
 _hypothesis_home = Path(tempfile.mkdtemp(prefix="arm_sim_hypothesis_"))
 configuration.set_hypothesis_home_dir(_hypothesis_home)
@@ -86,31 +97,80 @@ def changed_paths(before: dict, after: dict) -> list:
             for p in sorted(set(before) | set(after)) if before.get(p) != after.get(p)]
 
 
+def compiled_here() -> list:
+    """The kernel functions this process compiled itself (`module.function(signature)`),
+    where build.load's kernels are loaded from the cache a child process wrote."""
+    if "numba" not in sys.modules:
+        return []
+    from numba.core.registry import CPUDispatcher
+    return sorted(f"{name}.{attribute}{signature}"
+                  for name, module in list(sys.modules.items())
+                  if name.startswith("arm_sim_kernel_")
+                  for attribute, function in vars(module).items()
+                  if isinstance(function, CPUDispatcher)
+                  for signature in function.overloads
+                  if not function.stats.cache_hits.get(signature))
+
+
+def this_process() -> tuple:
+    """(peak resident memory in MB, kernel functions compiled here)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024, compiled_here()
+
+
 def pytest_sessionstart(session):
     _session[:] = [session]
     session.config.stash[CHANGED] = []
+    session.config.stash[PROCESSES] = {}
     # the run's own process says it; an xdist worker is a part of the run
     worker = hasattr(session.config, "workerinput")
     session.config.stash[BEFORE] = None if worker else checkout_state()
 
 
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    """An xdist worker's account (its pytest_sessionfinish), heard by the run's process."""
+    if "arm_sim" in getattr(node, "workeroutput", {}):
+        node.config.stash[PROCESSES][node.gateway.id] = node.workeroutput["arm_sim"]
+
+
 def pytest_sessionfinish(session):
     shutil.rmtree(_hypothesis_home, ignore_errors=True)
-    before = session.config.stash.get(BEFORE, None)
+    config = session.config
+    if hasattr(config, "workerinput"):
+        config.workeroutput["arm_sim"] = this_process()
+        return
+    processes = config.stash[PROCESSES]
+    processes["main"] = this_process()
+    before = config.stash.get(BEFORE, None)
     after = checkout_state() if before is not None else None
     if after is not None and (changed := changed_paths(before, after)):
-        session.config.stash[CHANGED] = changed
+        config.stash[CHANGED] = changed
+    if config.stash[CHANGED] or any(compiled for _, compiled in processes.values()):
         if session.exitstatus in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED):
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_terminal_summary(terminalreporter, config):
     if changed := config.stash.get(CHANGED, []):
+        copy = Path(os.environ.get("ARM_SIM_SUITE_COPY") or "/").resolve() == CHECKOUT
         terminalreporter.section("the checkout changed", red=True)
-        terminalreporter.line("The suite must leave the checkout as it found it; these changed "
-                              "while it ran (a test wrote there, or you did meanwhile):")
+        terminalreporter.line(
+            "The suite must leave the checkout as it found it; these changed while it ran "
+            + ("(in the copy scripts/test runs it from: a test wrote there):" if copy else
+               "(a test wrote there, or you did meanwhile):"))
         for line in changed:
             terminalreporter.line(f"  {line}")
+    processes = config.stash.get(PROCESSES, {})
+    if compiled := sorted({f for _, found in processes.values() for f in found}):
+        terminalreporter.section("kernels compiled in the suite's processes", red=True)
+        terminalreporter.line("numba keeps what a compile made for the life of the process "
+                              "(tens of MB a scene); these were not loaded from the cache a "
+                              "child process wrote (physics/compiled/apart.py):")
+        for line in compiled:
+            terminalreporter.line(f"  {line}")
+    if processes:
+        terminalreporter.write_line("peak memory: " + ", ".join(
+            f"{name} {peak} MB" for name, (peak, _) in sorted(processes.items())))
 
 
 @pytest.hookimpl(trylast=True)

@@ -64,6 +64,7 @@ class ArmSimCore(CommandInput, Console):
         self.sim.event_listeners.append(self._on_sim_event)
         self.commands.restart()
         self.held = False                   # integration left the finite numbers; holding
+        self.published = Published()        # the JointStates, the last finite one kept
         self.max_abs_residual = 0.0
         self._last_tick_wall = None
         self.interval = Interval(self.wall_clock(), self.sim.time, self.refused_commands,
@@ -152,6 +153,8 @@ class ArmSimCore(CommandInput, Console):
                 servo.hold(self.sim.dynamics, self.sim.readings)   # where it reads it is
                 self.recorder.event("command timeout: torque dropped to zero", "warn")
             self._advance()
+        else:       # held: the state stands still, time does not (stamps, /clock, --duration)
+            self.sim.steps += self.config.steps_per_tick
         if self.interval.waiting:         # the status's pace counts from the first tick done
             self.first_tick_done()
         return self.joint_state()
@@ -168,35 +171,32 @@ class ArmSimCore(CommandInput, Console):
         self.recorder.step(self.config.steps_per_tick, self._last_tick_wall, self.late_ticks)
         total = sum(sim.state)          # finite: every value is (inf - inf, NaN are NaN)
         if sim.holding or (total - total != 0.0 and not all(isfinite(v) for v in sim.state)):
-            # The simulator refused a step that would leave the finite numbers; hold the
-            # whole tick so joint_states never carries a non-finite number.
+            # The simulator refused a step that would leave the finite numbers; hold the whole
+            # tick's state (never a non-finite number), its time going on as refused steps do
             self.recorder.hand_over()
-            sim.state, sim.steps = before
-            self.held = True
-            self.log.error(f"{sim.fault or 'integration cannot stay finite'} (at t = "
-                           f"{sim.time:.6f} s); holding until reset")
-            self.recorder.event("integration not finite: holding", "error")
-            return
+            sim.state, sim.steps = before[0], before[1] + self.config.steps_per_tick
+            return self._hold(sim.fault or "integration cannot stay finite",
+                              "integration not finite: holding")
         residual = abs_residual(sim)    # the divergence check's, computed once
         if residual > self.max_abs_residual:      # as max() keeps it, NaN included
             self.max_abs_residual = residual
+
+    def _hold(self, why: str, event: str) -> None:
+        self.held = True
+        self.log.error(f"{why} (at t = {self.sim.time:.6f} s); holding until reset")
+        self.recorder.event(event, "error")
 
     def stamp_ns(self) -> int:
         return self.start_stamp_ns + self._elapsed_before_reset_ns + self.sim.steps * round(self.sim.step_size * 1e9)
 
     def joint_state(self) -> JointStateData:
-        """Positions, velocities and the torque the joints receive (after gearing, windings
-        and effort limits: what a joint torque sensor would read). With `sensors`, positions
-        and velocities are the readings (physics/sensing/), and `truth` the state itself,
-        same stamp (~/true_joint_states)."""
-        y, values = self.sim.state, self.config.values
-        tau = self.sim.joint_torque(y)
-        truth = JointStateData(self.stamp_ns(), values["frame_id"], values["joint_names"],
-                               [y[0], y[1]], [y[2], y[3]], [float(tau[0]), float(tau[1])])
-        if self.sim.scene.sensors is None:
-            return truth
-        r = self.sim.readings
-        return truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
+        """The JointState now (Published.joint_state): positions, velocities and the torque
+        the joints receive, or the readings beside the truth; always finite."""
+        data, finite = self.published.joint_state(self.sim, self.config.values, self.stamp_ns())
+        if not (finite or self.held):   # a reading or torque past the doubles: held, said
+            self._hold("a reading or torque is beyond double precision; holding the last "
+                       "finite message", "readings not finite: holding")
+        return data
 
     def reset(self) -> None:       # back to the initial state; stamps keep increasing
         self._restart(self.config, "reset to the scene's initial state")
@@ -226,6 +226,34 @@ class ArmSimCore(CommandInput, Console):
                                    self.commands.last_refusal)
         return DiagnosticData(self.stamp_ns(), level, f"{NODE_NAME}: simulation", message,
                               NODE_NAME, values)
+
+
+class Published:
+    """The JointStates a node publishes, and the last of them whose numbers were all finite:
+    what it publishes, at the stamp of the moment, where a reading or torque leaves the
+    doubles at a finite state (a scene's start is finite: physics/trust/guard.check_start)."""
+
+    def __init__(self):
+        self.last = None
+
+    def joint_state(self, sim, values: dict, stamp_ns: int) -> tuple[JointStateData, bool]:
+        """(the JointState of `sim` now, whether its numbers are finite; if not, the last
+        one that was). Positions, velocities and the torque the joints receive (after
+        gearing, windings and effort limits: what a joint torque sensor would read). With
+        `sensors`, positions and velocities are the readings (physics/sensing/), and `truth`
+        the state itself, same stamp (~/true_joint_states)."""
+        y, tau = sim.state, sim.joint_torque(sim.state)
+        data = truth = JointStateData(stamp_ns, values["frame_id"], values["joint_names"],
+                                      [y[0], y[1]], [y[2], y[3]], [float(tau[0]), float(tau[1])])
+        if sim.scene.sensors is not None:
+            r = sim.readings
+            data = truth._replace(position=[r[0], r[1]], velocity=[r[2], r[3]], truth=truth)
+        if all(isfinite(v) for part in (data, truth) for v in part.position + part.velocity
+               + part.effort):
+            self.last = data
+            return data, True
+        truth = self.last.truth and self.last.truth._replace(stamp_ns=stamp_ns)
+        return self.last._replace(stamp_ns=stamp_ns, truth=truth), False
 
 
 def started(config: NodeConfig, recording: bool = True) -> str:

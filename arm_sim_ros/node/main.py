@@ -77,7 +77,7 @@ def run_dds(ros_argv: list, duration: float | None, status, stop=None, quiet=Fal
     return 0
 
 
-ROS_TYPES = {"float": "double", "str": "string", "bool": "bool", "float_pair": "double[2]",
+ROS_TYPES = {"float": "double", "int": "integer", "str": "string", "bool": "bool", "float_pair": "double[2]",
              "float_or_pair": "double[1|2]", "str_list": "string[]"}
 
 

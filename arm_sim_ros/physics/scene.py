@@ -16,24 +16,16 @@ from .. import yaml_files
 from ..usage import did_you_mean
 from .trust.accuracy import DEFAULT_MAX_SUBSTEPS, DEFAULT_TOLERANCE, MAX_SUBSTEPS
 from .trust.unestimated import ESTIMATES
-from .effects import (BUILDERS, MAPPING_EFFECTS, POLICIES, SERVO_POLICIES, EffortLimits,
-                      JointLimits, Motors, scene_effects, validate)
+from .effects import POLICIES, SERVO_POLICIES, JointLimits, Motors, scene_effects
+from .scene_values import MAPPINGS, SceneError, checked
 from . import angles, sensing
 from .stepping.integrators import DEFAULT_ATOL, DEFAULT_RTOL, INTEGRATORS
 from .stepping.stability import UNNAMED, unstiff_method
-from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError, brief
+from .model import MAX_ANGLE, PAIR_FIELDS, ArmParameters, ParameterError
 
 
 MIN_STEP_SIZE = 1e-9      # s: stamps count whole nanoseconds
 MAX_DURATION = 1e9        # s (~32 years): nanosecond stamps stay within 64 bits
-# Scene keys whose value is a mapping of parameters (each effect's, the sensors'), and how
-# a validated mapping is built for its cross-checks.
-MAPPINGS = MAPPING_EFFECTS | {"sensors": sensing.Sensors}
-BUILT = BUILDERS | {"sensors": sensing.Sensors}
-
-
-class SceneError(ValueError):
-    """A scene or override that cannot be simulated; the message says what and why."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +58,7 @@ class Scene:
     rtol: float = DEFAULT_RTOL       # error tolerances of the embedded pair (dopri5) only
     atol: float = DEFAULT_ATOL
     tolerance: float = DEFAULT_TOLERANCE   # local error per second a step may make (accuracy.py)
-    max_substeps: float = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
+    max_substeps: int = DEFAULT_MAX_SUBSTEPS   # the most sub-steps a tolerance may ask of a step
     # what a run computes of its own error (trust/unestimated.py): global (the shadow and
     # its checks) or off (the steps alone: no error estimate, so tolerance 0)
     estimate: str = "global"
@@ -115,8 +107,8 @@ class Scene:
             raise SceneError(f"stability_plan {self.stability_plan!r} is unknown; choose on "
                              "(sub-steps where a step would be unstable, the default) or off "
                              "(every step whole: a stability study)")
-        if not (1 <= self.max_substeps <= MAX_SUBSTEPS and self.max_substeps % 1 == 0):
-            raise SceneError(f"max_substeps = {self.max_substeps:g} must be a whole number from 1 "
+        if not 1 <= self.max_substeps <= MAX_SUBSTEPS:
+            raise SceneError(f"max_substeps = {self.max_substeps} must be a whole number from 1 "
                              f"to {MAX_SUBSTEPS} (sub-steps a tolerance may ask of one step)")
         if not MIN_STEP_SIZE <= self.step_size <= MAX_DURATION:
             raise SceneError(f"step_size = {self.step_size} must be positive: from "
@@ -145,7 +137,10 @@ class Scene:
             raise SceneError(str(error)) from None
         for effect in effects:
             try:
-                derived = (effect.stiffness(arm), effect.frequency(arm))
+                derived = [effect.stiffness(arm), effect.frequency(arm)]
+                for name in ("engaged_stiffness", "engaged_frequency"):   # a compliant
+                    if hasattr(effect, name):                             # limit's, engaged
+                        derived.append(getattr(effect, name)(arm))
             except (OverflowError, ZeroDivisionError, ValueError):
                 derived = (inf,)
             if not all(isfinite(v) for v in derived):
@@ -184,18 +179,26 @@ class Scene:
                 merged[key] = value
             else:
                 raise SceneError(unknown_key(key))
+        if "estimate" in merged:       # YAML's `off` (a bool) is the word here already
+            merged["estimate"] = coerce_value("estimate", "str", merged["estimate"])
         if merged.get("estimate") == "off" and "tolerance" not in merged:
             merged["tolerance"] = 0.0   # no estimate, no tolerance: unless named beside it
         return dataclass_replace(self, **merged)
 
-    def with_text_overrides(self, assignments) -> "Scene":
-        """Apply `key=value` strings as the command line gives them (pairs as `1,0`)."""
-        overrides = {}
+    def with_text_overrides(self, assignments, given=None) -> "Scene":
+        """Apply `key=value` strings as the command line gives them (pairs as `1,0`), in one
+        change with the values `given` beside them (--tolerance, --estimate ...): one rule
+        for what goes together (estimate off alone sets tolerance 0, not beside one)."""
+        overrides = dict(given or {})
         for text in assignments:
             key, sep, value = text.partition("=")
             key = key.strip()
             if not sep or not key:
                 raise SceneError(f"--set {text!r} is not of the form key=value")
+            if key in overrides:        # the last would win unseen
+                beside = (f"beside --{key.replace('_', '-')}" if key in (given or {})
+                          else "twice")
+                raise SceneError(f"--set {key} is given {beside}; give it once")
             overrides[key] = parse_value(key, value)
         return self.replace(**overrides)
 
@@ -212,8 +215,8 @@ class Scene:
         return steps
 
 
-FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else
-                        "float" if f.type == "float" else "str") for f in fields(Scene)}
+FIELD_KINDS = {f.name: ("pair" if "tuple" in str(f.type) else f.type if f.type in ("float", "int")
+                        else "str") for f in fields(Scene)}
 FIELD_KINDS |= {"damping": "float_or_pair", "effort_limits": "pair_or_none"}
 FIELD_KINDS |= {name: "effect" for name in MAPPINGS}
 
@@ -226,69 +229,14 @@ def _text(value) -> str:
     return str(list(value)) if isinstance(value, tuple) else str(value)
 
 
-def _as_text(value) -> str:
-    """Why a number arrived as text: ROS 2 (rcl, C's strtod) reads one a double cannot hold
-    (beyond 1.8e308, or below the smallest normal double and not exact) as text."""
-    try:
-        number = float(value) if isinstance(value, str) and len(value) < 5000 else None
-    except ValueError:
-        return ""
-    if number is None or number != number:
-        return ""
-    return (" (text: ROS 2 reads a number beyond the doubles, or below 2.2e-308 and not "
-            "exactly a double, as text; write 0.0 or a number in range)")
-
-
 def coerce_value(name: str, kind: str, value):
-    """`value` as the kind ("float", "str", "pair", or a scene's "float_or_pair",
-    "pair_or_none", "effect") needs it, or SceneError saying why. Also the node's check for
-    its own numbers, text and pairs."""
+    """`value` as the kind needs it (scene_values.checked), its numbers written in degrees
+    (`90deg`) in radians first, or SceneError saying why. Also the node's check for its
+    own numbers, text and pairs."""
     value = in_radians(name, value)
-    if kind == "float_or_pair":
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            return coerce_value(name, "float", value)
-        pair = coerce_value(name, "pair", value)
-        return 0.0 if pair == (0.0, 0.0) else pair
-    if kind == "pair_or_none":
-        return None if value is None else _effect_value(name, EffortLimits.parameter, value)
-    if kind == "effect":
-        if value is None:
-            return None
-        if isinstance(value, dict):
-            value = {k: in_radians(f"{name}.{k}", v) for k, v in value.items()}
-        try:
-            values = validate(name, MAPPINGS[name].parameters, value)
-            if name in BUILT:
-                BUILT[name](**values)     # its cross-checks: windings all three or none ...
-        except ParameterError as error:
-            raise SceneError(str(error)) from None
-        return values
-    if kind == "str":
-        if not isinstance(value, str):
-            raise SceneError(f"{name} must be text, got {brief(value)}")
-        return value
-    if kind == "pair":
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            raise SceneError(f"{name} must be a list of two numbers, got {brief(value)}")
-        if len(value) != 2:
-            raise SceneError(f"{name} needs two numbers (one per joint or link), got {list(value)}")
-        return tuple(coerce_value(f"{name}[{i}]", "float", v) for i, v in enumerate(value))
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{name} must be a number, got {brief(value, 60)}{_as_text(value)}")
-    try:
-        value = float(value)
-    except OverflowError:
-        raise SceneError(f"{name} = {brief(value, 20)} is beyond the largest double") from None
-    if not isfinite(value):
-        raise SceneError(f"{name} = {value} is not finite")
-    return value
-
-
-def _effect_value(name, parameter, value):
-    try:
-        return parameter.coerce(name.partition(".")[0], value)
-    except ParameterError as error:
-        raise SceneError(str(error)) from None
+    if kind == "effect" and isinstance(value, dict):
+        value = {k: in_radians(f"{name}.{k}", v) for k, v in value.items()}
+    return checked(name, kind, value)
 
 
 def unknown_key(key: str) -> str:
@@ -323,12 +271,26 @@ def parse_value(key: str, text: str):
             return tuple(_number(key, v) for v in text.split(","))
         if kind == "float":
             return _number(key, text)
+        if kind == "int":
+            return _whole(key, text)
     except SceneError:
         raise
     except ValueError:
-        raise SceneError(f"{key}={text!r} is malformed: expected "
-                         f"{'two numbers like 1,0' if kind == 'pair' else 'a number'}") from None
+        expected = {"pair": "two numbers like 1,0", "int": "a whole number"}.get(kind, "a number")
+        raise SceneError(f"{key}={text!r} is malformed: expected {expected}") from None
     return text
+
+
+def _whole(key: str, text: str):
+    """An integer as written (`9223372036854775807`), never through a double, which holds
+    whole numbers exactly only up to 2^53; `7.0` or `1e3` are read as doubles."""
+    text = text.strip()
+    if len(text.lstrip("+-")) > 400:           # int() refuses 4300 digits with a traceback
+        raise SceneError(f"{key}: an integer of {len(text)} digits is beyond its range")
+    try:
+        return int(text)
+    except ValueError:
+        return float(text)
 
 
 def _number(key: str, text: str) -> float:

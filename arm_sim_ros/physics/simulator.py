@@ -27,7 +27,7 @@ from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS, step_for
 from .stepping.generated import shared
-from .scene import Scene
+from .scene import Scene, SceneError
 from .compiled.switch_run import Switched
 from .compiled.held import Settled, settle
 from .reports import Event, Sample
@@ -45,6 +45,7 @@ class Simulator:
         self.steps = 0
         self._build(scene)
         self.reset()
+        starts_finite(self)
 
     def _build(self, scene: Scene, command=None) -> None:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
@@ -233,6 +234,14 @@ class Simulator:
                 if on_step is not None: on_step(self)   # noqa: E701 (the class's 200 lines)
             left -= taken
         return largest
+
+
+def starts_finite(sim: Simulator) -> None:
+    """SceneError (one line) where what sim starts from is not finite (guard.check_start)."""
+    try:
+        guard.check_start(sim)
+    except model.ParameterError as error:
+        raise SceneError(str(error)) from None
 
 
 def code_of(scene: Scene, command=None) -> tuple:

@@ -5,8 +5,9 @@ currents i1, i2), with sensors the readings (q1_measured, q2_measured, qd1_measu
 qd2_measured: physics/sensing/), the joint torque, the energies, work and dissipated energy (0 where absent), every
 other channel of the scene by name, the balance residual, and the simulator's error books
 after the step: error_estimate (the step's local error estimate) and accumulated_error
-(their sum since reset), both max over q, qd (rad, rad/s); nan where the simulator does
-not estimate the steps.
+(their sum since reset), both max over q, qd (rad, rad/s); empty where the simulator does
+not estimate the steps (estimate off, a refused step): no cell holds a number that is not
+finite.
 
 Rows are written in blocks of about BLOCK_BYTES. A write the disk refuses (a full disk,
 a file-size limit) ends the run with one line: the file is cut back to the last whole row
@@ -76,9 +77,9 @@ class CsvRecorder:
         s = sim.sample()
         row = (s.t, *s.q, *s.qd, *s.extra.values(), *(s.measured or ()), *s.tau, s.kinetic,
                s.potential, s.total,
-               s.work, s.dissipated, *(s.channels[c] for c in self._others), s.residual,
-               sim.error_estimate, sim.accumulated_error)
-        self._writer.writerow([repr(v) for v in row])
+               s.work, s.dissipated, *(s.channels[c] for c in self._others), s.residual)
+        books = (sim.error_estimate, sim.accumulated_error)     # NaN: not estimated, empty
+        self._writer.writerow([repr(v) for v in row] + ["" if v != v else repr(v) for v in books])
         if self._block.tell() >= BLOCK_BYTES:
             self._flush()
 

@@ -103,6 +103,9 @@ class Snapshot:
         # (inputs, losses) booked by channels a live change removed (damping set to 0 ...)
         self.retired = tuple(sim.retired)
         self.estimates = sim.error_estimate == sim.error_estimate   # NaN: not estimated
+        # What the whole recording holds (carry_on: a live switch of `estimate`): the modes
+        # in the order they ran, and whether any of its rows carry estimates.
+        self.modes, self.estimated = (sim.scene.estimate,), self.estimates
         self.held_by = held_by(sim.scene)
         # An embedded pair (dopri5) adapts its own step: it has no sub-steps to count.
         self.adaptive = INTEGRATORS[sim.scene.method].adaptive
@@ -131,7 +134,19 @@ class Snapshot:
         """What the blueprint and the series' styles depend on."""
         return (self.arm, self.parts, tuple(self.kinds.items()), self.extra, self.drives,
                 self.commanded, self.estimates, self.held_by, self.initial_energy, self.measured,
-                self.looped)
+                self.looped, self.modes, self.estimated)
+
+    def carry_on(self, before: Snapshot | None) -> Snapshot:
+        """This setup's snapshot in a recording whose earlier rows `before` read: the error
+        estimate's modes and rows it held so far are the recording's still (a node switched
+        from global to off holds the estimates made until then)."""
+        if before is not None:
+            mode = self.modes[-1]
+            self.modes = before.modes + ((mode,) if before.modes[-1] != mode else ())
+            self.estimated = before.estimated or self.estimates
+        if len(self.modes) > 1:           # what held the error: each mode in its turn
+            self.held_by = f"estimate {', then '.join(self.modes)}: the events say when"
+        return self
 
     def joint_torque(self, states, commands):
         """(n, 2) torque the joints receive, as sim.dynamics.joint_torque gives it row by
@@ -233,6 +248,21 @@ def channel_values(snap: Snapshot, states, commands) -> dict:
     return values
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)    # the viewer draws in float32
+
+
+def reach(arm) -> float:
+    """Half the width of the arm's view: a little more than the arm at full stretch, at most
+    what the viewer's float32 holds."""
+    return min(1.1 * sum(arm.link_lengths), FLOAT32_MAX)
+
+
+def drawn(arm) -> bool:
+    """Whether the viewer's float32 holds the arm's drawing (an arm of 1e154 m it does not:
+    its drawing is left out, its numbers recorded all the same)."""
+    return 1.1 * sum(arm.link_lengths) < FLOAT32_MAX
+
+
 def drawing_points(arm, q1, q2):
     """Elbow and tip of many configurations, in the physics' coordinates (y up); the view
     flips them for the viewer's 2D y axis, which points down (blueprint.FLIP)."""
@@ -263,7 +293,7 @@ def error_books(sim) -> tuple:
 def accuracy_paths(snap: Snapshot) -> list[str]:
     """The error books' entities: the estimates where the simulator makes them, and the
     sub-steps unless the integrator adapts its own step (dopri5 takes no sub-steps)."""
-    return (([LOCAL_ERROR, ACCUMULATED_ERROR] if snap.estimates else [])
+    return (([LOCAL_ERROR, ACCUMULATED_ERROR] if snap.estimated else [])
             + ([] if snap.adaptive else [SUBSTEPS]))
 
 

@@ -24,16 +24,13 @@ def scene_from_args(args, note=None) -> Scene:
         scene = dataclass_replace(on_urdf, name=f"{scene.name} on {Path(args.urdf).name}")
     if getattr(args, "step", None) is not None:
         scene = scene.replace(step_size=parse_value("step_size", args.step))
-    overrides = {key: parse_value(key, getattr(args, key)) for key in ("tolerance", "max_substeps")
-                 if getattr(args, key, None) is not None}
+    options = {key: parse_value(key, getattr(args, key)) for key in ("tolerance", "max_substeps")
+               if getattr(args, key, None) is not None}
     if getattr(args, "estimate", None) is not None:   # off alone: tolerance 0 (Scene.replace)
-        overrides["estimate"] = args.estimate
-    scene = scene.replace(**overrides)
-    given = [text.partition("=")[0].strip() for text in getattr(args, "set", None) or []]
-    twice = next((key for k, key in enumerate(given) if key and key in given[:k]), None)
-    if twice:                   # the last would win unseen
-        raise SceneError(f"--set {twice} is given twice; give it once")
-    scene = scene.with_text_overrides(getattr(args, "set", None) or [])
+        options["estimate"] = args.estimate
+    # the options and --set in one change: `--set estimate=off --tolerance 1e-3` is refused
+    # as `--estimate off --tolerance 1e-3` is, not the tolerance dropped
+    scene = scene.with_text_overrides(getattr(args, "set", None) or [], options)
     warning = angle_warning(scene.initial_positions)
     if warning:
         note(f"warning: {warning}")

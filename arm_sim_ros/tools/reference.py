@@ -20,7 +20,7 @@ from ..node.main import ROS_TYPES, build_parser as node_parser
 from .control.follower import build_parser as controllers_parser
 from ..node.params.parameters import PARAMETERS, SPECS, scene_defaults, when_changed
 from ..physics.effects import EffortLimits
-from ..physics.effects.base import CHECKS, REQUIRED
+from ..physics.effects.base import REQUIRED, must_be
 from ..physics.angles import ANGLE_KEYS
 from ..physics.scene import FIELD_KINDS, MAPPINGS, Scene, load_scene, preset_names
 from ..usage import EXIT_CODES
@@ -39,7 +39,7 @@ OFFLINE_ONLY = {
                       "sub-steps (the node always plans); off: every step whole, so a run may "
                       "diverge there (a stability study: `arm-sim sweep`)",
 }
-KINDS = {"pair": "[a, b]", "float": "number", "str": "text", "float_or_pair": "number or [a, b]",
+KINDS = {"pair": "[a, b]", "float": "number", "int": "integer", "str": "text", "float_or_pair": "number or [a, b]",
          "pair_or_none": "[a, b]", "effect": "mapping", "names": "[name, name]",
          "choice": "name"}
 COLUMNS = "100"          # argparse wraps --help to the terminal: the pages use one width
@@ -80,7 +80,7 @@ def effect_keys(effect: str, parameters) -> list:
     for p in parameters:
         key = effect if p.name == effect else f"{effect}.{p.name}"
         default = "required" if p.default is REQUIRED else _value(p.default)
-        must = ", ".join(p.choices) if p.choices else CHECKS[p.check][1]
+        must = ", ".join(p.choices) if p.choices else must_be(p.check, p.limit)
         rows.append((f"`{key}`", KINDS[p.kind], p.unit, must, default, p.description))
     return rows
 

@@ -209,9 +209,10 @@ def test_every_key_of_every_effect_is_one_parameter_named_as_the_scene_file_name
                                 for p in kind.parameters}
     assert ({spec.name for spec in EFFECT_PARAMETERS} == keys
             == set(AT_START) | set(COMPLIANT) | set(SERVO) | set(SENSED))
-    # double, double[], string[] (the servo's interface names), string (sensors.velocity)
+    # double, double[], string[] (the servo's interface names), string (sensors.velocity),
+    # integer (sensors.seed)
     assert {spec.kind for spec in EFFECT_PARAMETERS} == {"float", "float_pair", "str_list",
-                                                         "str"}
+                                                         "str", "int"}
 
 
 @pytest.mark.parametrize("values", [AT_START, COMPLIANT, SERVO],
@@ -273,7 +274,7 @@ def test_effects_that_change_live_are_the_safe_ones_and_every_other_effect_key_i
     assert set(LIVE) == {"damping", "command_delay"} | {n for n in names
                                                         if n.partition(".")[0] in live}
     assert set(START_ONLY) == {"scene", "robot_description", "joint_states_topic", "clock_origin",
-                               "joint_commands_topic"} | (names - set(LIVE))
+                               "joint_commands_topic", "paused"} | (names - set(LIVE))
 
 
 def test_arm_sim_node_help_lists_every_effect_parameter_and_whether_it_changes_live(capsys):

@@ -3,7 +3,10 @@ fuzzed parameters. Zero crashes, zero non-finite outputs, every bad command coun
 parameter refused with nothing changed. DDS tests: loopback only, domains 60-79."""
 import logging
 import math
+import os
 import random
+import subprocess
+import sys
 import time
 
 import pytest
@@ -14,7 +17,7 @@ from arm_sim_ros.node import core as node_core
 from arm_sim_ros.node.params import parameters as node_params
 from arm_sim_ros.node.wire import messages as msg
 from node.node_oracle import expected_states
-from node.test_node_dds import TIMEOUT, FakeClock, start
+from node.test_node_dds import CONFIG, TIMEOUT, FakeClock, start
 
 HOSTILE_COMMANDS = [
     [math.nan, 0.0], [0.0, math.nan], [math.nan, math.nan], [math.inf, 0.0], [-math.inf, 0.0],
@@ -79,14 +82,48 @@ def test_a_command_flood_on_the_core_is_counted_and_logged_at_a_limited_rate(cap
 
 
 def test_a_state_that_cannot_stay_finite_is_held_and_reported_over_dds():
-    node, peer = start(61, initial_velocities=[1e300, -1e300])
+    """Its first step leaves the doubles: the node holds the last finite state, says so,
+    and its time runs on (stamps and /clock never stand still while it runs)."""
+    node, peer = start(61, initial_velocities=[5e153, -5e153])
     for _ in range(3):
         node.tick()
     received = peer.read(peer.joint_states, 3, msg.JointState)
     assert all(all_finite(m) for m in received)
-    assert [list(m.velocity) for m in received] == [[1e300, -1e300]] * 3
+    assert [list(m.velocity) for m in received] == [[5e153, -5e153]] * 3
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in received]
+    assert [b - a for a, b in zip(stamps, stamps[1:])] == [10_000_000] * 2
     assert node.core.held and "holding the last finite state" in node.core.sim.fault
     assert node.publish_diagnostics().level == interface.ERROR
+
+
+def test_a_held_node_still_ends_at_its_duration():
+    """`arm_sim_node --duration` counts simulated time: a node held since its first step
+    (time standing still, before) ran for ever; it ends, exit 0, saying it held."""
+    env = dict(os.environ, ROS_DOMAIN_ID="62", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               CYCLONEDDS_URI=CONFIG, ARM_SIM_COMPILED="0")
+    done = subprocess.run(
+        [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", "dds", "--duration", "0.5",
+         "--quiet", "--ros-args", "-p", "initial_velocities:=[5.0e153, -5.0e153]",
+         "-p", "real_time_factor:=0.0"], env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "holding the last finite state" in done.stderr
+
+
+def test_a_torque_or_reading_that_leaves_the_doubles_at_a_finite_state_holds_the_last_message():
+    """Past what a scene's start is checked for (guard.check_start), a drive could still ask
+    a torque beyond the doubles at a finite state: the node publishes the last finite
+    message at each new stamp, says so once, and reports itself held."""
+    core = node_core.ArmSimCore(node_params.resolve_parameters({"damping": 0.5}),
+                                logging.getLogger("beyond"), FakeClock())
+    last = core.tick()
+    core.sim.joint_torque = lambda state=None: (math.inf, math.nan)   # from now on
+    held = [core.tick() for _ in range(3)]
+    assert all(all_finite(data) for data in held) and core.held
+    assert [d.position for d in held] == [last.position] * 3 and [d.effort for d in held] == \
+        [last.effort] * 3
+    stamps = [last.stamp_ns] + [d.stamp_ns for d in held]
+    assert [b - a for a, b in zip(stamps, stamps[1:])] == [10_000_000] * 3
+    assert core.diagnostics().level == interface.ERROR
 
 
 # --- parameter fuzzing -------------------------------------------------------------------------

@@ -465,7 +465,7 @@ def test_the_viewer_addresses_rerun_takes_are_accepted(address):
 STOPPED_INSIDE_A_COMPILE = """
 import sys
 from arm_sim_ros.node import main as node_main
-def run_dds(ros_argv, duration, status, stop):
+def run_dds(ros_argv, duration, status, stop, quiet):
     stop.requested = {requested}          # as Stop does when the signal came
     raise RuntimeError("no compiled object yet for <Library 'step'>")   # numba, half built
 node_main.run_dds = run_dds

@@ -17,7 +17,8 @@ PACKAGE = Path(__file__).resolve().parents[2] / "arm_sim_ros"
 ORDER = {
     "base": ["usage", "interface", "yaml_files", "outputs"],
     "physics": ["model", "reports", "stepping", "effects", "sensing", "dynamics", "switching", "trust",
-                "angles", "scene", "urdf", "compiled", "simulator", "rollouts", "batch", "metrics"],
+                "angles", "scene_values", "scene", "urdf", "compiled", "simulator", "rollouts",
+                "batch", "metrics"],
     "recording": ["csv_file", "readouts", "bags", "rrd"],
     "node": ["wire", "params", "commands", "services", "diagnostics", "status", "schedule",
              "stop", "recorder_link", "core", "transports", "main", "entry"],

@@ -174,4 +174,4 @@ def test_csv_rows_carry_each_steps_error_estimate_and_their_sum(capsys, tmp_path
     assert float(rows[-1]["accumulated_error"]) > 0
     run_cli(capsys, "run", *UNESTIMATED, "--csv", str(path), "--force")
     rows = list(csv.DictReader(path.open()))
-    assert {r["error_estimate"] for r in rows} == {r["accumulated_error"] for r in rows} == {"nan"}
+    assert {r["error_estimate"] for r in rows} == {r["accumulated_error"] for r in rows} == {""}

@@ -8,7 +8,8 @@ import pytest
 
 from arm_sim_ros.node import core as node_core
 from arm_sim_ros.node.params import parameters as node_params
-from arm_sim_ros.physics.scene import load_scene
+from arm_sim_ros.node.params.ros_args import FALSE, TRUE, load_params_file
+from arm_sim_ros.physics.scene import SceneError, load_scene
 from arm_sim_ros.recording.rrd import readback
 from arm_sim_ros.tools import cli
 
@@ -40,10 +41,14 @@ def test_the_text_result_of_an_off_run_says_it_carries_no_error_estimate(capsys)
     assert out.splitlines()[-1] == f"error estimate: none (estimate off: {NO_ESTIMATE})"
 
 
-@pytest.mark.parametrize("argv", [["--set", "estimate=off", "--set", "tolerance=1e-6"],
-                                  ["--estimate", "off", "--tolerance", "1e-6"],
-                                  ["--estimate", "off", "--set", "tolerance=1e-6"]])
-def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
+# every way the command line names the two: one rule (`--set estimate=off --tolerance` dropped
+# the tolerance unseen, while `--estimate off --tolerance` was refused)
+@pytest.mark.parametrize("estimate", [["--set", "estimate=off"], ["--estimate", "off"]])
+@pytest.mark.parametrize("tolerance", [["--set", "tolerance=1e-6"], ["--tolerance", "1e-6"]])
+@pytest.mark.parametrize("tolerance_first", [False, True])
+def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, estimate, tolerance,
+                                                              tolerance_first):
+    argv = tolerance + estimate if tolerance_first else estimate + tolerance
     code, out, err = run_cli(capsys, "run", "--duration", "0.1", *argv)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and "estimate off computes no error estimate" in err
@@ -54,6 +59,26 @@ def test_estimate_off_with_a_tolerance_is_refused_in_one_line(capsys, argv):
 def test_estimate_off_alone_or_with_tolerance_0_runs(capsys, argv):
     code, out, _ = run_cli(capsys, "run", "--duration", "0.1", *argv, "--json")
     assert code == 0 and json.loads(out)["estimate"] == "off"
+
+
+@pytest.mark.parametrize("word", sorted(TRUE | FALSE))
+def test_a_scene_file_and_a_parameter_file_read_estimate_off_alike(tmp_path, word):
+    """`estimate: off` as the docs write it: YAML reads the bare word as a bool (rcl reads
+    y and n as bools too); a scene file and the node's --params-file take every such word
+    alike, as `off` where it means false and refused where it means true."""
+    (tmp_path / "s.yaml").write_text(f"estimate: {word}\n")
+    (tmp_path / "p.yaml").write_text(f"arm_sim:\n  ros__parameters:\n    estimate: {word}\n")
+    try:
+        scene = load_scene(str(tmp_path / "s.yaml")).estimate
+    except SceneError as refused:
+        scene = ("refused", str(refused).partition("): ")[2])    # after "scene 's' (path)"
+    try:
+        node = node_params.resolve_parameters(load_params_file(str(tmp_path / "p.yaml")))
+        node = node.scene.estimate
+    except node_params.ParameterRefused as refused:
+        node = ("refused", refused.reason)
+    assert scene == node
+    assert scene == "off" if word in FALSE else "got True (a bare" in scene[1]
 
 
 def test_the_bag_diagnostics_of_an_off_run_say_it(capsys, tmp_path):
@@ -101,3 +126,53 @@ def test_the_node_refuses_estimate_off_beside_a_tolerance_naming_the_parameter()
     config = node_params.resolve_parameters({"scene": "damped_release"})
     assert config.with_changes({"tolerance": 0.0, "estimate": "off"}).scene.estimate == "off"
     assert load_scene("damped_release").estimate == "global"
+
+
+def latest_view_names(path) -> set:
+    """The names of the views of the recording's latest blueprint (one is sent again where
+    the layout changes): those its viewport's root container holds, container by container."""
+    import uuid
+
+    import rerun as rr
+    reader = rr.chunk.RrdReader(str(path))
+    (store,) = reader.blueprints()
+    rows, roots = {}, []
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name == "ViewportBlueprint:root_container":
+                roots += batch.column(name).to_pylist()
+            elif name in ("ContainerBlueprint:contents", "ViewBlueprint:display_name"):
+                rows[chunk.entity_path] = batch.column(name).to_pylist()[-1]
+    names, todo = set(), [f"/container/{uuid.UUID(bytes=bytes(roots[-1][0]))}"]
+    while todo:
+        entity = todo.pop()
+        if entity.startswith("/view/"):
+            names.add(rows[entity][0])
+        else:
+            todo += ["/" + child for child in rows[entity]]
+    return names
+
+
+@pytest.mark.parametrize("first, then", [("global", "off"), ("off", "global")])
+def test_a_recording_switched_live_says_both_modes_and_keeps_its_estimates(tmp_path, first,
+                                                                           then):
+    """A node switched live from global to off holds the estimates made until the switch:
+    its recording says both modes in order, keeps the estimate panes, and labels none of
+    its steps "no error estimate"; the other way round alike."""
+    path = tmp_path / "switched.rrd"
+    node = node_core.ArmSimCore(node_params.resolve_parameters(
+        {"scene": "damped_release", "estimate": first, "rerun_path": str(path)}),
+        logging.getLogger("switched"))
+    for _ in range(40):
+        node.tick()
+    node.set_parameters({"estimate": then})
+    for _ in range(40):
+        node.tick()
+    node.finish()
+    estimate = readback.properties(path)["estimate"]
+    assert estimate["mode"] == f"{first}, then {then}"
+    assert estimate["meaning"].index(f"{first}:") < estimate["meaning"].index(f"then {then}:")
+    views = latest_view_names(path)
+    assert any(name.startswith("Local error per step") for name in views)
+    assert not any("no error estimate" in name for name in views)

@@ -31,8 +31,8 @@ def strict_json(text):
 
 
 @pytest.mark.parametrize("overrides", [
-    ["--set", "initial_velocities=1e200,0"],           # kinetic energy overflows
-    ["--set", "initial_velocities=1e200,1e200"],        # the first step is not finite
+    ["--set", "initial_velocities=5e153,0"],           # a stage's velocity products overflow
+    ["--set", "initial_velocities=5e153,5e153"],        # the first step is not finite
 ])
 def test_json_is_strict_and_a_faulted_run_exits_1(capsys, overrides):
     code = cli.main(["run", *overrides, "--duration", "0.05", "--json"])

@@ -144,8 +144,9 @@ def test_the_time_left_is_paced_by_the_blocks_own_work_a_first_compile_left_out(
     assert seen.paced == [2.0, 4.0, 6.0] and seen.done == [1, 2, 3]
     from arm_sim_ros.tools.progress import Progress
     progress = Progress(3, "arm-sim sweep", unit="samples", clock=lambda: 100.0)
-    progress.measured(2.0)
-    assert progress.working(100.0) == 2.0                  # what the time left is paced by
+    progress.measured(2.0)                       # one sample's work took 2 s: two more, 4 s
+    progress.done = 1
+    assert progress.left(100.0) == "about 4 s left"
 
 
 def test_a_small_sweep_stays_in_its_process_a_long_one_spreads(monkeypatch):

@@ -36,7 +36,7 @@ ANYTIME = "live"
 @dataclass(frozen=True)
 class ParameterSpec:
     name: str
-    kind: str              # "str", "float", "bool", "float_pair", "str_list"
+    kind: str              # "str", "float", "int", "bool", "float_pair", "str_list"
     default: object        # a value, or a function scene -> value for scene-derived defaults
     meaning: str
     scene_field: bool = False   # True when the value is a Scene field (changing it rebuilds)
@@ -96,7 +96,8 @@ def _effect_spec(effect: str, key: str | None, parameter) -> ParameterSpec:
              else f"; not set: {list(default) if isinstance(default, tuple) else default}")
     return ParameterSpec(
         effect if key is None else f"{effect}.{key}",
-        {"pair": "float_pair", "names": "str_list", "choice": "str"}.get(parameter.kind, "float"),
+        {"pair": "float_pair", "names": "str_list", "choice": "str", "int": "int"}.get(
+            parameter.kind, "float"),
         _effect_value(effect, key),
         f"{parameter.description}, {parameter.unit}{unset}", scene_field=True, effect=parameter,
         when=START if effect in START_ONLY_WHY else KEPT)
@@ -137,7 +138,7 @@ PARAMETERS = (
     _scene_spec("atol", "float", "absolute error tolerance of integrator dopri5"),
     _scene_spec("tolerance", "float", "local error per simulated second a fixed step may "
                 "make before it splits into sub-steps (0 = estimate only)"),
-    _scene_spec("max_substeps", "float", "the most sub-steps the tolerance may ask of one step; "
+    _scene_spec("max_substeps", "int", "the most sub-steps the tolerance may ask of one step; "
                 "past it the step is taken at the cap and the node says so once; the node "
                 "refuses physics whose stability plan needs more"),
     _scene_spec("estimate", "str", "what the run computes of its own error: global (the "

@@ -22,13 +22,8 @@ def shorten(text: str, limit: int = 3 * BRIEF) -> str:
     return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} chars)"
 
 
-SCENE_KINDS = {"float": "float", "str": "str", "float_pair": "pair",   # node kind -> scene kind
+SCENE_KINDS = {"float": "float", "int": "int", "str": "str", "float_pair": "pair",  # node -> scene
                "float_or_pair": "float_or_pair"}
-
-
-# rcl reads an unquoted off (no, false ...) as a bool: a text parameter one of whose words
-# is `off` takes that bool back as the word (`-p estimate:=off`, as the scene file says it).
-FALSE_AS_TEXT = {"estimate": "off"}
 
 
 def coerce(spec, value):
@@ -36,8 +31,6 @@ def coerce(spec, value):
     Numbers, text and pairs are checked as scene values are; integers pass as doubles
     (`-p publish_rate:=100`)."""
     kind, name = spec.kind, spec.name
-    if value is False and name in FALSE_AS_TEXT:
-        value = FALSE_AS_TEXT[name]
     if kind != "str":                 # an angle in degrees, `90deg`, as everywhere
         try:
             value = in_radians(name, value)

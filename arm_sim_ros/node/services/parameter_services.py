@@ -23,7 +23,7 @@ from ..params.values import ParameterRefused, shorten
 # rcl_interfaces/msg/ParameterType
 (NOT_SET, BOOL, INTEGER, DOUBLE, STRING, BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY,
  STRING_ARRAY) = range(10)
-KIND_TYPES = {"str": STRING, "float": DOUBLE, "bool": BOOL, "float_pair": DOUBLE_ARRAY,
+KIND_TYPES = {"str": STRING, "float": DOUBLE, "int": INTEGER, "bool": BOOL, "float_pair": DOUBLE_ARRAY,
               "str_list": STRING_ARRAY}
 SEPARATOR = "."                  # rclpy's PARAMETER_SEPARATOR_STRING
 DEPTH_RECURSIVE = 0              # rcl_interfaces/srv/ListParameters.DEPTH_RECURSIVE

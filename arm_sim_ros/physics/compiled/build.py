@@ -27,11 +27,12 @@ import inspect
 import os
 import re
 import sys
-from functools import lru_cache, partial
+from functools import lru_cache
 from pathlib import Path
 
 from ..trust import accuracy, controller, guard, shadow
-from . import cache
+from . import apart, cache
+from .entries import check_entries, say_once, set_aside
 from ..stepping import integrators
 from .kernels import BATCH, BOOKS_PARTS, HELPERS, KERNELS, run_loop
 from . import draws, sensed as sensing
@@ -44,7 +45,6 @@ try:              # in the default install where numba has a wheel (scripts/venv
     import numba
 except Exception as error:   # absent, or installed and broken (an llvmlite without its library)
     numba, MISSING = None, f"{type(error).__name__}: {error}"
-_say_once = lru_cache(maxsize=None)(partial(print, file=sys.stderr))   # a line, once a process
 if numba is not None:     # a first compile says so, and is timed (cache.py)
     from numba.core import event as numba_event
     cache.watch(numba_event)
@@ -92,26 +92,38 @@ STORELESS = ("actuator", "effort_limits", "damping", "payload", "controller_mode
 
 
 def available() -> bool:
-    """numba imports (else one line says why), ARM_SIM_COMPILED is not 0, the cache writable
-    (found once per directory and process)."""
+    """numba imports, ARM_SIM_COMPILED is not 0, the cache a writable directory: else the
+    pure-Python path, one line saying why (but for ARM_SIM_COMPILED=0, which chose it)."""
     if os.environ.get("ARM_SIM_COMPILED", "1") == "0":
         return False
     if numba is None:
-        _say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
-                  "slower with the same numbers; `pip install numba==0.68.1` gives the "
-                  "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
+        say_once(f"arm_sim_ros: numba does not import ({MISSING}): the pure-Python path, "
+                 "slower with the same numbers; `pip install numba==0.68.1` gives the "
+                 "compiled path (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
         return False
-    return writable(os.environ.get("ARM_SIM_CACHE", ""))
+    problem = unusable(cache_dir())
+    if problem:
+        say_once(f"arm_sim_ros: the kernel cache {cache_dir()} {problem}: the pure-Python "
+                 "path, slower with the same numbers; set ARM_SIM_CACHE to a writable "
+                 "directory (ARM_SIM_COMPILED=0 chooses pure Python without this line)")
+    return not problem
 
 
 @lru_cache(maxsize=None)
-def writable(named: str) -> bool:
-    """Whether the cache directory (ARM_SIM_CACHE as named) exists or can be made, writable."""
+def unusable(directory: Path) -> str | None:
+    """Why the kernel cache `directory` cannot be used (a file there, no write permission),
+    None if it can: made if missing, and written to once, as numba will write to it (once
+    a process: every simulator asks)."""
+    if directory.exists() and not directory.is_dir():
+        return "is a file, not a directory"
     try:
-        cache_dir().mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return False
-    return os.access(cache_dir(), os.W_OK)
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".probe.{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        return f"is not a writable directory ({error.strerror or error})"
+    return None
 
 
 def cache_dir() -> Path:
@@ -300,21 +312,35 @@ def module_name(source: str) -> str:
 
 
 def load(source: str):
-    """The module of `source`, written once to the cache directory under its hash."""
+    """The module of `source`, written once to the cache directory under its hash; a file
+    there that is not that text (cut short, garbage) is set aside and written anew, and
+    numba's files of its functions are read checked (entries.py)."""
     name = module_name(source)
     if name in sys.modules:
         return sys.modules[name]
     directory = cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.py"
-    if not path.is_file() or path.read_text() != source:
+    text = source.encode()
+    try:
+        written = path.read_bytes()
+    except FileNotFoundError:
+        written = None
+    except OSError as error:          # a directory in its place, unreadable
+        written = error.strerror or str(error)
+    if written != text:
+        if written is not None:       # numba's files of it go stale with its new stamp
+            set_aside(str(path), "not the text its name's hash names"
+                      if isinstance(written, bytes) else written)
         temporary = path.with_suffix(f".{os.getpid()}.tmp")
-        temporary.write_text(source)
+        temporary.write_bytes(text)
         os.replace(temporary, path)        # atomic: two processes may write it at once
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    check_entries(module)              # a damaged entry set aside: compiled again
+    apart.compile_apart(module)        # a first compile's memory goes with a child process
     return module
 
 

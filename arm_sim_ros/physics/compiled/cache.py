@@ -5,7 +5,9 @@ build.cache_dir): each scene structure's generated module (arm_sim_kernel_<hash>
 by the SHA-256 of its text: build.load) and numba's machine code beside it (__pycache__: an
 index and the object code of each function). Nothing in them names the checkout or the
 venv, so every checkout and every venv of one machine with the same numba shares them;
-a scene structure compiles once per machine.
+a scene structure compiles once per machine. A damaged entry is set aside and compiled
+again (entries.py); a cache the run cannot write gives the pure-Python path, said once
+(build.available).
 
 Loaded from that cache a kernel is ready in a fraction of a second; compiled, it takes
 seconds (numba's "numba:compile" events fire only then). The first compile of a kernel

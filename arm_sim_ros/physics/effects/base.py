@@ -24,20 +24,27 @@ CHECKS = {  # check name: (test, what the value must be)
 }
 
 
+def must_be(check: str, limit: float | None) -> str:
+    """What a value under `check` and `limit` must be, in words (messages, the reference)."""
+    what = CHECKS[check][1]
+    return what if limit is None else f"{what}, at most {limit:g} in magnitude"
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One scene key of an effect: `<effect>.<name>` in a scene file, --set and ROS params."""
 
     name: str
-    kind: str              # "pair" (one value per joint), "float", "names" (one of
-    unit: str              # `choices` per joint) or "choice" (one of `choices`)
-    check: str = "any"
+    kind: str              # "pair" (one value per joint), "float", "int" (a whole number,
+    unit: str              # held exactly), "names" (one of `choices` per joint) or "choice"
+    check: str = "any"     # (one of `choices`)
     default: object = REQUIRED
     description: str = ""
     choices: tuple = ()
+    limit: float | None = None   # the largest magnitude (an angle's: model.MAX_ANGLE)
 
     def coerce(self, effect: str, value):
-        """The value as a float or a pair of floats, or ParameterError saying why."""
+        """The value as a float, an int or a pair of floats, or ParameterError saying why."""
         label = effect if effect == self.name else f"{effect}.{self.name}"   # effort_limits
         if self.kind == "names":
             return self._names(label, value)
@@ -55,6 +62,13 @@ class Parameter:
                 raise ParameterError(f"{label} needs two numbers, one per joint ({self.unit}), "
                                      f"got {len(value)}")
             return tuple(self._number(f"{label}[{i}]", v) for i, v in enumerate(value))
+        if self.kind == "int":
+            value = whole_number(label, value, self.unit)
+            test, what = CHECKS[self.check]
+            if not test(value):
+                raise ParameterError(f"{label} = {brief(value, 40)} is impossible: it must be "
+                                     f"{what}{in_unit(self.unit)}")
+            return value
         return self._number(label, value)
 
     def _names(self, label: str, value) -> tuple:
@@ -74,11 +88,36 @@ class Parameter:
             value = float(value)
         except OverflowError:
             value = float("inf")
-        test, what = CHECKS[self.check]
-        if not isfinite(value) or not test(value):
-            raise ParameterError(f"{label} = {value:g} is impossible: it must be {what} "
-                                 f"({self.unit})")
+        test, _ = CHECKS[self.check]
+        if not isfinite(value) or not test(value) or (self.limit is not None
+                                                      and abs(value) > self.limit):
+            raise ParameterError(f"{label} = {value:g} is impossible: it must be "
+                                 f"{must_be(self.check, self.limit)} ({self.unit})")
         return value
+
+
+def whole_number(label: str, value, unit: str) -> int:
+    """An integer key (a seed, max_substeps) as an int, from an int or a whole double; a
+    double holds whole numbers exactly only up to 2^53, so one beyond it is refused rather
+    than taken for a neighbour (2^60 and 2^60 + 1 read alike as doubles)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) <= 2 ** 53:
+        return int(value)            # 7.0 from a YAML or a double parameter: 7
+    if isinstance(value, float) and value.is_integer():
+        raise ParameterError(f"{label} = {value:g} was read as a double, which holds whole "
+                             "numbers exactly only up to 2^53: write it as an integer, "
+                             "without a decimal point or an exponent")
+    if isinstance(value, float):
+        raise ParameterError(f"{label} = {value:g} is impossible: it must be a whole "
+                             f"number{in_unit(unit)}")
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParameterError(f"{label} must be a whole number{in_unit(unit)}, got "
+                             f"{brief(value)}")
+    return value
+
+
+def in_unit(unit: str) -> str:
+    """` (unit)` for a message, nothing for a pure number (unit "1")."""
+    return "" if unit == "1" else f" ({unit})"
 
 
 def validate(effect: str, parameters, mapping) -> dict:

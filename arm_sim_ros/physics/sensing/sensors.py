@@ -26,8 +26,10 @@ whole-number rules are checked here against the step size, in the scene's words.
 """
 from __future__ import annotations
 
+from math import isfinite
+
 from ..effects.base import Parameter
-from ..model import ParameterError
+from ..model import MAX_ANGLE, ParameterError
 from .noise import POSITION, VELOCITY, Draws
 
 VELOCITIES = ("differences", "true")
@@ -39,32 +41,36 @@ class Sensors:
 
     name = "sensors"
     parameters = (
-        Parameter("seed", "float", "1", "whole", default=0.0,
+        Parameter("seed", "int", "1", "whole", default=0,
                   description="seed of every draw: the same seed gives the same readings"),
         Parameter("rate", "float", "Hz", "positive", default=None,
                   description="sample rate, readings held in between; 1/rate a whole number "
                               "of steps (none = every step)"),
+        # A reading is an angle: its resolution, noise and offset are angles too, within the
+        # largest angle a state may hold, so that every reading and every difference of two
+        # over a period stays a double (a noise of 1e306 rad read inf).
         Parameter("position_resolution", "pair", "rad per count", "positive", default=None,
                   description="encoder resolution: readings are whole counts of it "
-                              "(none = not quantised)"),
+                              "(none = not quantised)", limit=MAX_ANGLE),
         Parameter("position_noise", "pair", "rad", "non-negative", default=(0.0, 0.0),
                   description="standard deviation of the Gaussian noise on each position "
-                              "sample"),
+                              "sample", limit=MAX_ANGLE),
         Parameter("position_offset", "pair", "rad", default=(0.0, 0.0),
-                  description="calibration error of each encoder's zero, added to the reading"),
+                  description="calibration error of each encoder's zero, added to the reading",
+                  limit=MAX_ANGLE),
         Parameter("velocity", "choice", "differences|true", default="true",
                   choices=VELOCITIES,
                   description="velocity read as the difference of the last two position "
                               "samples over 1/rate, or the true velocity plus velocity_noise"),
         Parameter("velocity_noise", "pair", "rad/s", "non-negative", default=(0.0, 0.0),
                   description="standard deviation of the Gaussian noise on each velocity "
-                              "sample (velocity: true)"),
+                              "sample (velocity: true)", limit=MAX_ANGLE),
         Parameter("delay", "float", "s", "non-negative", default=0.0,
                   description="a reading published at t is the measurement taken at t - delay; "
                               "a whole number of steps"),
     )
 
-    def __init__(self, seed=0.0, rate=None, position_resolution=None,
+    def __init__(self, seed=0, rate=None, position_resolution=None,
                  position_noise=(0.0, 0.0), position_offset=(0.0, 0.0), velocity="true",
                  velocity_noise=(0.0, 0.0), delay=0.0):
         if velocity == "differences" and any(velocity_noise):
@@ -76,7 +82,10 @@ class Sensors:
 
 
 def whole_steps(seconds: float, step_size: float) -> int | None:
-    """`seconds` as a whole number of steps, None if it is not one."""
+    """`seconds` as a whole number of steps, None if it is not one (or more steps than a
+    double counts: a rate of 1e-310 Hz, a delay of 1e308 s)."""
+    if not isfinite(seconds / step_size):
+        return None
     steps = round(seconds / step_size)
     return steps if abs(steps * step_size - seconds) <= RELATIVE * max(seconds,
                                                                         step_size) else None
@@ -91,6 +100,14 @@ def delay_steps(name: str, seconds: float, step_size: float) -> int:
         raise ParameterError(f"{name} = {seconds:g} s is {seconds / step_size:.6g} steps of "
                              f"{step_size:g} s; a delay must be a whole number of steps")
     return steps
+
+
+def quantise(x: float, resolution: float) -> float:
+    """x as a whole number of counts of `resolution` (half to even). A resolution so fine
+    that the count is beyond the doubles (1e-310 rad) is finer than x's own rounding: x is
+    then a whole count already, as exactly as a double can say."""
+    counts = x / resolution
+    return round(counts) * resolution if isfinite(counts) else x
 
 
 class SensorModel:
@@ -126,7 +143,7 @@ class SensorModel:
             if self.noise[j]:
                 x += self.noise[j] * self.draws.normal(POSITION, j, index)
             if self.resolution is not None:
-                x = round(x / self.resolution[j]) * self.resolution[j]
+                x = quantise(x, self.resolution[j])
             out.append(x)
         return out
 

@@ -17,7 +17,10 @@ books do not close (said once, the run goes on and ends in failure).
 """
 from __future__ import annotations
 
-from ..model import MAX_ANGLE
+from math import isfinite
+
+from .. import model
+from ..model import MAX_ANGLE, ParameterError
 
 CHECK_EVERY = 64          # steps between raises of the energy in play (a state's own peak)
 BOOKS_FRACTION = 0.25     # a method that resolves the motion keeps its energy error within
@@ -74,3 +77,42 @@ def audit(sim, residual: float) -> bool:
     if off:
         sim.books_fault = sim.fault = f"at t = {sim.time:.6g} s {off}"
     return bool(off)
+
+
+def check_start(sim) -> None:
+    """ParameterError (one line, naming what to change) where the scene starts beyond double
+    precision: its energy (initial velocities of 1e300 rad/s, springs stretched 1e308 rad),
+    the least energy its effects can store (gravity of 1e308), the torque the drive asks
+    (a controller model's gravity of 1e308) or the sensors' first reading. Every later
+    state is checked as it is made; a start that is not finite would hold at once, its
+    outputs not finite: refused here, the same at the node's start, live and offline."""
+    state = sim.state
+    if not isfinite(model.kinetic_energy(sim.arm, state[0:2], state[2:4])):
+        raise ParameterError(f"initial_velocities = {list(state[2:4])} give this arm a "
+                             "kinetic energy beyond double precision; use speeds at a robot's "
+                             "scale")
+    if not isfinite(in_play(sim, state)):       # E - its lowest: each part, and their sum
+        beyond = [effect.name for effect in sim.dynamics.active
+                  if not isfinite(stored_range(sim, effect, state))]
+        raise ParameterError(f"{'+'.join(beyond) or 'the effects'}: the energy stored (at the "
+                             "initial state, or at its lowest) is beyond double precision with "
+                             "these values; use values at a robot's scale")
+    torque = sim.joint_torque()
+    if not all(isfinite(v) for v in torque):
+        raise ParameterError(f"the torque at the initial state is {list(torque)} N m, beyond "
+                             "double precision with these values (gravity, masses, gains); use "
+                             "values at a robot's scale")
+    if sim.scene.sensors is not None and not all(isfinite(v) for v in sim.readings):
+        raise ParameterError(f"the sensors' first reading {list(sim.readings)} is beyond double "
+                             "precision; use sensors at a robot's scale")
+
+
+def stored_range(sim, effect, state) -> float:
+    """What `effect` stores at `state` above the least it can (inf past the doubles)."""
+    start = sim.extra.index(effect.state[0]) if effect.state else 0
+    extra = state[4 + start:4 + start + len(effect.state)]
+    try:
+        return effect.stored_energy(sim.arm, state[0:2], extra) - effect.lowest_stored_energy(
+            sim.arm)
+    except (OverflowError, ValueError):
+        return float("inf")

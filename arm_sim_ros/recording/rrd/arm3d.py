@@ -22,6 +22,7 @@ from ...physics.scene import scene_dirs
 from ...physics.urdf.read import read_urdf
 from .blueprint import JOINT_COLORS
 from .columns import joint_transforms, vectors3d
+from ..readouts import FLOAT32_MAX
 
 ROOT = "arm3d"
 URDF_NAME = "two_link_arm.urdf"
@@ -96,10 +97,13 @@ class Arm3D:
             send(f"{ROOT}/joints/{joint.name}", index, joint_transforms,
                  compose(rpy_quaternion(joint.origin_rpy), turn), tuple(joint.origin_xyz),
                  joint.parent_link, joint.child_link)
-        if torque is None:
+        shown = None if torque is None else np.all(
+            np.abs(TORQUE_SCALE * torque) < FLOAT32_MAX, axis=1)     # the viewer's float32
+        if shown is None or not shown.any():
             return
+        index = tuple(column[shown] for column in index)
         for k, (path, joint) in enumerate(zip(TORQUE_PATHS, self.joints)):
-            arrows = TORQUE_SCALE * np.outer(torque[:, k], joint.axis)
+            arrows = TORQUE_SCALE * np.outer(torque[shown, k], joint.axis)
             send(path, index, vectors3d, arrows)
 
 

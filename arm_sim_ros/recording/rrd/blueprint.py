@@ -16,7 +16,7 @@ from ...physics.effects import EffortLimits
 from ...physics.scene import MAPPINGS, load_scene, preset_names
 from ...physics.urdf.read import changed_values
 from ..readouts import (ACCUMULATED_ERROR, COMMANDED, KINDS, LOCAL_ERROR, MEASURED, SUBSTEPS,
-                        accuracy_paths, channel_path, extra_paths, stored_path)
+                        accuracy_paths, channel_path, extra_paths, reach, stored_path)
 
 TIMELINE = "sim_time"            # steps x step_size; continued across resets, as the node's stamps
 ROS_TIME = "ros_time"            # the JointState stamp of each row: stamp origin + sim_time
@@ -179,11 +179,6 @@ def books_paths(snap) -> list[str]:
             + [RESIDUAL[0]])
 
 
-def reach(arm) -> float:
-    """Half the width of the arm's view: a little more than the arm at full stretch."""
-    return 1.1 * sum(arm.link_lengths)
-
-
 def torque_view(snap, path: str) -> rrb.TimeSeriesView:
     """A joint's view; with commands, the torque view shows the commanded beside the applied."""
     if path == "joints/torque" and snap.commanded:   # short: four such panes share a row
@@ -233,12 +228,12 @@ def trust_view(snap) -> rrb.Vertical:
             name=title, contents=list(named), plot_legend=legend,
             overrides={path: rr.SeriesLines.from_fields(names=[drawable(name)])
                        for path, name in named.items()})
-    none = "" if snap.estimates else " (no error estimate for these steps)"
+    none = "" if snap.estimated else " (no error estimate for these steps)"
     counted = SUBSTEPS in accuracy_paths(snap)    # dopri5 adapts its own step: none to count
     panes = [pane(f"Energy balance residual [J]: flat at 0 when the books close "
                   f"(E(0) = {snap.initial_energy:.6g} J){'' if counted else none}",
                   {RESIDUAL[0]: "residual E−E₀−inputs+losses [J]"})]
-    if snap.estimates:
+    if snap.estimated:
         panes += [pane(f"Local error per step [rad, rad/s]; {snap.held_by}",
                        {LOCAL_ERROR: "local error estimate [rad, rad/s]"}),
                   pane("Accumulated error [rad, rad/s]: estimate of the global error",

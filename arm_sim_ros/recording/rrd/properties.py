@@ -51,12 +51,20 @@ def integrator_values(sim) -> dict:
     return values
 
 
-def estimate_values(scene) -> dict:
-    """What the run computes of its own error (scene key estimate), said in words."""
-    if scene.estimate == "off":
-        return {"mode": "off", "meaning": NO_ESTIMATE + ": no shadow, no local error checks"}
-    return {"mode": scene.estimate, "meaning": "the global error estimate: a shadow beside "
-            "every step, the local error measured on a schedule (accuracy/* series)"}
+MEANINGS = {"off": NO_ESTIMATE + ": no shadow, no local error checks",
+            "global": "the global error estimate: a shadow beside every step, the local error "
+                      "measured on a schedule (accuracy/* series)"}
+
+
+def estimate_values(modes) -> dict:
+    """What the run computed of its own error (scene key estimate), said in words: `modes`
+    in the order they ran (a node's live switch: each from the restart the events name)."""
+    if len(modes) == 1:
+        return {"mode": modes[0], "meaning": MEANINGS[modes[0]]}
+    spans = "; then ".join(f"{mode}: {MEANINGS[mode]}" for mode in modes)
+    return {"mode": ", then ".join(modes),
+            "meaning": f"switched while recording (each from the restart the events name): "
+                       f"{spans}"}
 
 
 def properties(snap, sim, stamp_origin_ns: int | None, node: bool = False) -> list:
@@ -71,7 +79,7 @@ def properties(snap, sim, stamp_origin_ns: int | None, node: bool = False) -> li
             parameter, value, unit_ = (list(column) for column in zip(*rows))
             out.append((f"effect.{effect.name}",
                         rr.AnyValues(parameter=parameter, value=value, unit=unit_)))
-    out.append(("estimate", rr.AnyValues(**estimate_values(sim.scene))))
+    out.append(("estimate", rr.AnyValues(**estimate_values(snap.modes))))
     clock = {"timelines": [TIMELINE, LOG_TIME] + ([ROS_TIME] if stamp_origin_ns is not None
                                                   else []),
              "source": "node" if node else "arm-sim run"}

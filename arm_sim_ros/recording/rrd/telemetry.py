@@ -42,7 +42,7 @@ import rerun as rr
 from .arm3d import arm3d_for
 from .blueprint import blueprint
 from ...physics.simulator import recorded_row
-from ..readouts import Snapshot, error_books, held_by, reads_alike
+from ..readouts import Snapshot, drawn, error_books, held_by, reads_alike
 from .sinks import check_rrd_file, open_sinks
 from .static_data import StaticData
 from .writer import BatchWriter
@@ -79,6 +79,7 @@ class RerunRecorder:
         self.sinks, self.enabled = [], False   # descriptions of the sinks that opened
         self.sim = None
         self._snapshot = None     # how the steps waiting read: sim's layout when they were taken
+        self._described = None    # the latest snapshot made: the recording's so far
         self._dynamics = None     # sim.dynamics then (a payload grasped rebuilds it)
         # Steps waiting to be sent, their error books (module docstring), text lines.
         self._states, self._books, self._runs, self._events = array("d"), array("d"), [], []
@@ -224,8 +225,9 @@ class RerunRecorder:
     def _describe(self, sim, initial=None) -> None:
         """Open the sinks (first time); what does not change from step to step (the layout
         too) is logged at the next send (StaticData)."""
-        snap = self._snapshot = Snapshot(sim, initial)
-        snap.arm3d = arm3d_for(sim.scene.links)   # the URDF has no payload
+        snap = self._snapshot = Snapshot(sim, initial).carry_on(self._described)
+        self._described = snap
+        snap.arm3d = arm3d_for(sim.scene.links) if drawn(sim.scene.links) else None   # no payload
         if self._layout is None:
             self._layout = self._static.drawn(snap)   # the default blueprint: drawn here
             if open_sinks(self.stream, blueprint(snap, self.live, self.node), self.sinks,
@@ -288,10 +290,11 @@ def _alike_carried_on(recorder: RerunRecorder, sim) -> bool:
     the next send."""
     if recorder._snapshot is None:
         return False
-    snap = Snapshot(sim, recorder._snapshot.initial)
+    snap = Snapshot(sim, recorder._snapshot.initial).carry_on(recorder._snapshot)
     if not reads_alike(recorder._snapshot, snap):
         return False
     snap.arm3d, recorder._snapshot, recorder._dynamics = recorder._snapshot.arm3d, snap, sim.dynamics
+    recorder._described = snap
     recorder._static.due = (snap, sim)
     return True
 

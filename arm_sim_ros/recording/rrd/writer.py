@@ -25,7 +25,7 @@ from itertools import chain
 
 from .blueprint import NODE_SERIES
 from .columns import nanoseconds, points, scalars, strips, text_lines, time_columns
-from ..readouts import accuracy_values, channel_values, drawing_points, unpack
+from ..readouts import accuracy_values, channel_values, drawing_points, drawn, unpack
 from .story import TickStory
 
 FRAME_PERIOD = 0.005             # simulated seconds between arm drawings: 200 frames/s is smooth
@@ -153,7 +153,7 @@ class BatchWriter:
         """Links, joints and the tip's trace every FRAME_PERIOD of simulated time; the 3D
         arm's joints and torque arrows at the same frames."""
         frames = np.flatnonzero(steps % max(1, round(FRAME_PERIOD / snap.step_size)) == 0)
-        if frames.size == 0:
+        if frames.size == 0 or not drawn(snap.arm):
             return
         index = self._index(frames, len(steps))
         elbow, tip = drawing_points(snap.arm, q1[frames], q2[frames])
