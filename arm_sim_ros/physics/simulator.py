@@ -51,8 +51,7 @@ class Simulator:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
         self.scene, self.arm = scene, scene.arm
         self.dynamics, self._step = code_of(scene, command)
-        self.channels = self.dynamics.channels
-        self.extra = self.dynamics.extra
+        self.channels, self.extra = self.dynamics.channels, self.dynamics.extra
         self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
         self._rhs = self.dynamics.function
         self._inputs, self._losses = book_entries(self.dynamics)
