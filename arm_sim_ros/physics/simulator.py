@@ -29,7 +29,7 @@ from .stepping.integrators import INTEGRATORS, step_for
 from .stepping.generated import shared
 from .scene import Scene, SceneError
 from .compiled.switch_run import Switched
-from .compiled.held import Settled, settle
+from .compiled.held import Settled, acting, settle
 from .reports import Event, Sample
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
@@ -215,7 +215,7 @@ class Simulator:
     def joint_torque(self, state=None) -> tuple[float, float]:
         """The torque the joints receive at `state` (now): after limits and windings."""
         if self.dynamics.command is not self.dynamics.given:   # a control loop's torque
-            settle(self)
+            acting(self)
         return tuple(self.dynamics.joint_torque(self.state if state is None else state))
 
     def sample(self) -> Sample:
@@ -360,14 +360,18 @@ def readings(sim: Simulator) -> tuple:
     without sensors that model something."""
     if sim.sensing is None:
         return tuple(sim.state[:4])
-    settle(sim)                  # what a compiled run holds of them
-    return sim.sensing.reading(sim)
+    read = sim.kernel and sim.kernel.reading(sim)     # in the arrays a compiled run holds
+    if read is None:
+        settle(sim)              # what a compiled run holds of them
+        read = sim.sensing.reading(sim)
+    return read
 
 
 def recorded_row(sim) -> tuple:
     """What a recording keeps of a step: the state; with sensors, the readings after it;
     under a control loop (sensing/loop.py), the torque that acted over it."""
-    settle(sim)                  # the torque acting, as a compiled run holds it
-    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     looped = sim.dynamics.command is not sim.dynamics.given
+    if looped:
+        acting(sim)              # the torque acting, as a compiled run holds it
+    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     return row + tuple(sim.dynamics.command) if looped else row

@@ -146,6 +146,11 @@ class Kernel:
         self.held, self.last, self.sound = (*run, books), sim.state, sim.steps
         return True
 
+    def reading(self, sim):
+        """The sensors' reading now taken in the arrays a run holds (Sensed.read), or None:
+        Python's (settled)."""
+        return None if self.held is None or self.sensed is None else self.sensed.read(sim)
+
     def settle(self, sim) -> None:
         """The books the arrays hold back into Python's objects (nothing when none)."""
         if self.held is None:

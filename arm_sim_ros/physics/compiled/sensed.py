@@ -174,12 +174,18 @@ def sense(q1, q2, u1, u2, w1, w2, steps, K, RS, RI, RF, LS, LI, DC, DG):
 
 
 @njit(cache=True, inline="always")
+def sample_kept(at_step, RS, RI, RF):
+    """The sample take_sample wrote after the ring's samples, kept (taken at `at_step`)."""
+    slot = wrap(RI[0] + RI[1], RI[7])
+    RF[0], RF[1] = RS[slot, 1], RS[slot, 2]
+    RI[1], RI[2], RI[3], RI[6] = RI[1] + 1, RI[2] + 1, at_step, 1
+
+
+@njit(cache=True, inline="always")
 def commit(at_step, took, passed, queued, acted, RS, RI, RF, LS, LI, DC):
     """What sense found, kept: the step it began has been taken."""
     if took == 1:
-        slot = wrap(RI[0] + RI[1], RI[7])
-        RF[0], RF[1] = RS[slot, 1], RS[slot, 2]
-        RI[1], RI[2], RI[3], RI[6] = RI[1] + 1, RI[2] + 1, at_step, 1
+        sample_kept(at_step, RS, RI, RF)
     if RI[11] == 1:
         RI[0], RI[1] = wrap(RI[0] + passed, RI[7]), RI[1] - passed
     if queued == 1:
@@ -188,6 +194,25 @@ def commit(at_step, took, passed, queued, acted, RS, RI, RF, LS, LI, DC):
             DC[12 + k] = DC[4 + k]
     if LI[5] == 1:
         LI[0], LI[1] = wrap(LI[0] + acted, LI[4]), LI[1] - acted
+
+
+@njit(cache=True)
+def read_now(q1, q2, u1, u2, steps, RS, RI, RF, DG, out):
+    """Readings.catch_up at `steps` in the arrays (the sample due taken and kept, the
+    readings passed dropped), the reading now into `out`: False (nothing kept) where Python
+    must take the sample."""
+    if steps - RI[3] >= RI[4]:
+        if not take_sample(q1, q2, u1, u2, steps, RS, RI, RF, DG):
+            return False
+        sample_kept(steps, RS, RI, RF)
+    head, count, size, due = RI[0], RI[1], RI[7], steps - RI[5]
+    passed = 0
+    while count - passed > 1 and RS[wrap(head + passed + 1, size), 0] <= due:
+        passed += 1
+    at = wrap(head + passed, size)
+    RI[0], RI[1] = at, count - passed
+    out[0], out[1], out[2], out[3] = RS[at, 1], RS[at, 2], RS[at, 3], RS[at, 4]
+    return True
 '''
 
 MORE = ", RS, RI, RF, LS, LI, DC, DG"
@@ -237,6 +262,7 @@ class Sensed:
         self.DG[:, 0] = np.iinfo(np.uint64).max        # no block yet
         self.looped = sensing.loop is not None
         self.law = drive_constants(sensing.loop, self.DC) if self.looped else True
+        self.module, self.out = module, np.zeros(4)
         if sensing.readings is not None and module is not None:   # Python's samples too
             model = sensing.readings.model
             model.draws = CompiledDraws(module.normal, model.draws.seed, self.DG)
@@ -261,6 +287,18 @@ class Sensed:
             return False
         return loop is None or (isinstance(books, Off) and loop.line is not None and
                                 self.law and all(isfinite(v) for v in inputs(loop)))
+
+    def read(self, sim):
+        """The reading now (Sensing.reading) while a run holds the readings here, taken in
+        the arrays: nothing to unpack and pack again around a read between steps; None
+        where Python must take it (after settling)."""
+        if self.RI[11] == 0:
+            return tuple(sim.state[:4])
+        y, out = sim.state, self.out
+        if not self.module.read_now(y[0], y[1], y[2], y[3], sim.steps, self.RS, self.RI,
+                                    self.RF, self.DG, out):
+            return None
+        return tuple(out.tolist())
 
     def pack(self, sensing, K) -> None:
         """The readings, the loop's queue and what acts now into the arrays (and K)."""
