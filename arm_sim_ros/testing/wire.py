@@ -74,7 +74,7 @@ class WireArm:
         self.log_path = directory / f"{stem}.log"
         self.log = open(self.log_path, "wb")
         command = [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", transport,
-                   "--quiet", "--ros-args",
+                   "--ros-args",
                    *itertools.chain.from_iterable(("-p", f"{k}:={ros_value(v)}")
                                                   for k, v in values.items())]
         self.process = subprocess.Popen(command, env=self.env, stdout=self.log,
@@ -197,9 +197,11 @@ class WireArm:
                 if time.monotonic() > deadline:
                     break
         if not self._first_state(deadline):
+            missing = self.client.unmatched() or ["its first state"]
             self.close()
             raise TimeoutError(f"the node did not come up on domain {self.domain_id} within "
-                               f"{START_TIMEOUT:g} s; its log: {self.log_path}")
+                               f"{START_TIMEOUT:g} s (not heard: {', '.join(missing)}); its "
+                               f"log: {self.log_path}")
 
     def _alive(self) -> None:
         if self.process is None:          # a launch's node: launch_testing watches it
