@@ -1,11 +1,12 @@
-"""What an in-process closed loop costs (arm_sim_ros.testing.closed_loop): seconds per run of
-a PD at 1 kHz on `release` (h = 1 ms, --seconds of simulated time, estimate off), without
+"""What an in-process closed loop costs (arm_sim_ros.testing.closed_loop): CPU seconds per run
+of a PD at 1 kHz on `release` (h = 1 ms, --seconds of simulated time, estimate off), without
 sensors, with the issue's full `sensors` block, and with it under a command_delay; beside
 the same rows on another checkout (--base DIR), timed in the same run.
 
 Each tree runs in a worker process of its own (PYTHONPATH = the tree); the workers time
 their rows in turns, each row keeping its fastest of --repeat rounds, after one untimed
-short run of each (compiled or loaded). The sensors block:
+short run of each (compiled or loaded). The time is the worker's CPU time (one thread):
+on a shared machine, less of the other work's than the wall clock. The sensors block:
 
     seed 7, rate 500 Hz, 4096 counts, noise 1e-4 rad, velocity differences, delay 2 ms
 
@@ -48,9 +49,9 @@ for overrides in ROWS.values():
 for _ in sys.stdin:
     times = []
     for overrides in ROWS.values():
-        start = time.perf_counter()
+        start = time.process_time()
         closed_loop(pd, "release", seconds, overrides=overrides)
-        times.append(time.perf_counter() - start)
+        times.append(time.process_time() - start)
     print(*times, flush=True)
 """
 
@@ -72,7 +73,7 @@ def main() -> None:
     finally:
         for worker in workers.values():
             worker.close()
-    print(f"closed_loop, a PD at 1 kHz on release, {args.seconds:g} s at h = 1 ms: s per run, "
+    print(f"closed_loop, a PD at 1 kHz on release, {args.seconds:g} s at h = 1 ms: CPU s per run, "
           f"the fastest of {args.repeat}")
     print(f"{'row':32s}" + "".join(f"{name:>12s}" for name in workers)
           + (f"{'base / this':>14s}" if len(workers) > 1 else ""))
