@@ -154,12 +154,14 @@ class Scene:
         return self.integrator or unstiff_method(scene_effects(self), self.arm, self.step_size)
 
     @cached_property
-    def links(self) -> ArmParameters:     # the bare links: no payload, no rotor inertia
+    def links(self) -> ArmParameters:
+        """The bare links: no payload, no rotor inertia."""
         return ArmParameters(**{name: getattr(self, name) for name in PAIR_FIELDS})
 
     @cached_property
     def arm(self) -> ArmParameters:
-        """The arm the physics moves: links, payload folded into link 2, motors' armature."""
+        """The arm the physics moves: links, the payload folded into link 2, and the motors'
+        reflected rotor inertia."""
         arm = self.links
         if self.motors is not None:
             arm = dataclass_replace(arm, armature=Motors(**self.motors).armature)
