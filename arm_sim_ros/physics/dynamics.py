@@ -16,7 +16,7 @@ from math import cos, sin
 from . import model
 from .effects import Channel, Effect, scene_effects
 from .sensing import drives
-from .stepping.integrators import source_code
+from .stepping.generated import source_code
 
 RIGID_BODY = [
     "    c = cos(q2)",

@@ -14,6 +14,7 @@ and reported once, the first time, as a `saturation` event.
 from __future__ import annotations
 
 from collections import Counter, deque
+from functools import partial
 from math import inf, isfinite, nan
 
 from .trust import accuracy, guard
@@ -26,9 +27,10 @@ from .effects import servo
 from . import sensing
 from .stepping.integrators import INTEGRATORS
 from .stepping.exponential import step_for
+from .stepping.generated import shared
 from .scene import Scene, SceneError
 from .compiled.switch_run import Switched
-from .compiled.held import Settled, settle
+from .compiled.held import Settled, acting, settle
 from .reports import Event, Sample
 
 EVENT_LOG_LENGTH = 100     # recent events kept; listeners see every one
@@ -50,8 +52,7 @@ class Simulator:
         """Dynamics, step and stability plan of `scene` (again after a payload change)."""
         self.scene, self.arm = scene, scene.arm
         self.dynamics, self._step = code_of(scene, command)
-        self.channels = self.dynamics.channels
-        self.extra = self.dynamics.extra
+        self.channels, self.extra = self.dynamics.channels, self.dynamics.extra
         self.state_names = ("q1", "q2", "qd1", "qd2") + self.extra + self.channels
         self._rhs = self.dynamics.function
         self._inputs, self._losses = book_entries(self.dynamics)
@@ -215,7 +216,7 @@ class Simulator:
     def joint_torque(self, state=None) -> tuple[float, float]:
         """The torque the joints receive at `state` (now): after limits and windings."""
         if self.dynamics.command is not self.dynamics.given:   # a control loop's torque
-            settle(self)
+            acting(self)
         return tuple(self.dynamics.joint_torque(self.state if state is None else state))
 
     def sample(self) -> Sample:
@@ -246,10 +247,13 @@ def starts_finite(sim: Simulator) -> None:
 def code_of(scene: Scene, command=None) -> tuple:
     """(dynamics, step): the scene's generated right-hand side and its method's step, the
     text the compiled path compiles (arm-sim inspect --source prints it)."""
-    dynamics = build_dynamics(scene, command)
-    step = step_for(INTEGRATORS[scene.method], len(dynamics.channels), dynamics.decay,
-                    rtol=scene.rtol, atol=scene.atol)
-    return dynamics, step
+    dynamics, tableau = build_dynamics(scene, command), INTEGRATORS[scene.method]
+    made = partial(step_for, tableau, len(dynamics.channels), dynamics.decay, rtol=scene.rtol,
+                   atol=scene.atol)
+    # a fixed step is a pure function, one per method and state (an adaptive step keeps its
+    # last sizes: its own)
+    return dynamics, made() if tableau.adaptive else shared(
+        (scene.method, len(dynamics.channels), dynamics.decay), made)
 
 
 def set_command(sim: Simulator, tau1: float, tau2: float, setpoints=None) -> None:
@@ -357,14 +361,18 @@ def readings(sim: Simulator) -> tuple:
     without sensors that model something."""
     if sim.sensing is None:
         return tuple(sim.state[:4])
-    settle(sim)                  # what a compiled run holds of them
-    return sim.sensing.reading(sim)
+    read = sim.kernel and sim.kernel.reading(sim)     # in the arrays a compiled run holds
+    if read is None:
+        settle(sim)              # what a compiled run holds of them
+        read = sim.sensing.reading(sim)
+    return read
 
 
 def recorded_row(sim) -> tuple:
     """What a recording keeps of a step: the state; with sensors, the readings after it;
     under a control loop (sensing/loop.py), the torque that acted over it."""
-    settle(sim)                  # the torque acting, as a compiled run holds it
-    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     looped = sim.dynamics.command is not sim.dynamics.given
+    if looped:
+        acting(sim)              # the torque acting, as a compiled run holds it
+    row = sim.state + sim.readings if sim.scene.sensors is not None else sim.state
     return row + tuple(sim.dynamics.command) if looped else row

@@ -31,7 +31,8 @@ from .trace import Trace
 
 DOMAINS = range(80, 120)          # private domains: the project's own tests use others
 START_TIMEOUT = 120.0             # s: a first run compiles the scene's kernels (tens of s)
-SILENCE = 10.0                    # s of wall time without a new state: the controller is gone
+SILENCE = 10.0                    # s of wall time with the latest state unanswered: the
+                                  # controller is gone
 DRAIN = 0.02                      # s between two looks at the states while a run goes on
 _taken = itertools.count()
 
@@ -73,7 +74,7 @@ class WireArm:
         self.log_path = directory / f"{stem}.log"
         self.log = open(self.log_path, "wb")
         command = [sys.executable, "-m", "arm_sim_ros.node.main", "--transport", transport,
-                   "--quiet", "--ros-args",
+                   "--ros-args",
                    *itertools.chain.from_iterable(("-p", f"{k}:={ros_value(v)}")
                                                   for k, v in values.items())]
         self.process = subprocess.Popen(command, env=self.env, stdout=self.log,
@@ -121,13 +122,20 @@ class WireArm:
         reply = self.client.services["step_simulation"].ask(steps=ticks)
         seen, quiet_since = len(self.heard.states), time.monotonic()
         # Blocked on the reply, the states waiting in the readers (no work of ours a tick):
-        # a look at them now and then tells a loop that goes on from one gone silent.
+        # a look at them now and then tells a loop that goes on from one gone silent. A
+        # state answered and not yet followed is the node's time (a first tick compiles the
+        # scene's kernels: tens of seconds), not the controller's.
         while (answer := reply()) is None:
             self._replied.wait(duration(seconds=DRAIN))
             self.heard.take()
+            now = time.monotonic()
             if len(self.heard.states) != seen:
-                seen, quiet_since = len(self.heard.states), time.monotonic()
-            elif time.monotonic() - quiet_since > self.silence:
+                seen, quiet_since = len(self.heard.states), now
+            elif max(self.heard.states) in self.heard.answers:
+                self._alive()
+                if now - quiet_since > START_TIMEOUT:
+                    raise ControllerError(self._stuck(), self.trace())
+            elif now - quiet_since > self.silence:
                 self._alive()
                 raise ControllerError(self._silent(), self.trace())
         if answer.result.result != 1:
@@ -160,10 +168,16 @@ class WireArm:
             time.sleep(0.001)
 
     def _silent(self) -> str:
-        t = f"t = {(max(self.heard.states) - min(self.heard.states)) / 1e9:.6f} s"
-        return (f"no command answered the state at {t} within {self.silence:g} s (wall): the "
-                f"controller went silent, or answers without the state's stamp in its "
-                f"header; domain {self.domain_id}, node log {self.log_path}")
+        return (f"no command answered the state at {self._at()} within {self.silence:g} s "
+                f"(wall): the controller went silent, or answers without the state's stamp "
+                f"in its header; domain {self.domain_id}, node log {self.log_path}")
+
+    def _stuck(self) -> str:
+        return (f"the node did not step within {START_TIMEOUT:g} s (wall) of the answer to "
+                f"its state at {self._at()}; domain {self.domain_id}, node log {self.log_path}")
+
+    def _at(self) -> str:
+        return f"t = {(max(self.heard.states) - min(self.heard.states)) / 1e9:.6f} s"
 
     def trace(self) -> Trace:
         """The trace of the whole run so far (heard.Heard.trace)."""
@@ -183,9 +197,11 @@ class WireArm:
                 if time.monotonic() > deadline:
                     break
         if not self._first_state(deadline):
+            missing = self.client.unmatched() or ["its first state"]
             self.close()
             raise TimeoutError(f"the node did not come up on domain {self.domain_id} within "
-                               f"{START_TIMEOUT:g} s; its log: {self.log_path}")
+                               f"{START_TIMEOUT:g} s (not heard: {', '.join(missing)}); its "
+                               f"log: {self.log_path}")
 
     def _alive(self) -> None:
         if self.process is None:          # a launch's node: launch_testing watches it

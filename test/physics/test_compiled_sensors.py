@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from arm_sim_ros.physics.compiled import build, draws
+from arm_sim_ros.physics.compiled.sensed import Sensed
 from arm_sim_ros.physics.scene import load_scene
 from arm_sim_ros.physics.sensing.noise import BLOCK, normals
-from arm_sim_ros.physics.simulator import Simulator
+from arm_sim_ros.physics.simulator import Simulator, recorded_row
 
 pytest.importorskip("numba")
 
@@ -74,18 +75,26 @@ def test_a_sensed_run_is_compiled_and_equals_pythons_bit_for_bit(name, monkeypat
     assert taken == []                        # every step in compiled runs
 
 
-def test_a_sensed_run_stepped_one_call_at_a_time_equals_pythons(monkeypatch):
-    """Simulator.step (the node's tick), readings read between steps: the compiled run of one
-    step hands its samples and queue back to Python's objects and takes them up again."""
-    python, fast, taken = python_and_compiled(SCENES["servo, delayed"], monkeypatch)
+@pytest.mark.parametrize("name", ["servo, delayed", "commanded, believed payload, delayed",
+                                  "readings, true velocity"])
+def test_a_sensed_run_stepped_one_call_at_a_time_equals_pythons(name, monkeypatch):
+    """Simulator.step (the node's tick, a closed loop's step), with the readings, the torque
+    and a recording's row read and a command given between steps: Python's, bit for bit.
+    The readings and the loop stay in the compiled run's arrays from step to step (packed
+    once: a read between steps is taken there, nothing unpacked and packed again)."""
+    packed, pack = [], Sensed.pack
+    monkeypatch.setattr(Sensed, "pack", lambda self, *args: (packed.append(1), pack(self, *args)))
+    python, fast, taken = python_and_compiled(SCENES[name], monkeypatch)
     for n in range(200):
         for sim in (python, fast):
-            if n == 100:
+            if n == 100 and "servo" in name:
                 sim.set_command(0.0, 0.0, {("position", 1): 0.5})
+            elif "commanded" in name:
+                sim.set_command(0.01 * (n % 7), -0.02 * (n % 5))
             sim.step()
-        assert (python.state, python.readings, python.joint_torque()) == \
-            (fast.state, fast.readings, fast.joint_torque())
-    assert taken == []
+        assert (python.state, python.readings, python.joint_torque(), recorded_row(python)) == \
+            (fast.state, fast.readings, fast.joint_torque(), recorded_row(fast))
+    assert taken == [] and len(packed) == 1
 
 
 def draws_module():
@@ -94,11 +103,11 @@ def draws_module():
                       + draws.source() + '''
 @njit(cache=True)
 def many(seed, stream, joint, indices):
-    R = np.zeros(10, dtype=np.uint64)
-    R[0] = NEVER_BLOCK
+    R = np.zeros((1, 10), dtype=np.uint64)
+    R[0, 0] = NEVER_BLOCK
     out = np.empty(len(indices))
     for k in range(len(indices)):
-        out[k] = normal(R, seed, stream, joint, indices[k])
+        out[k] = normal(R, 0, seed, stream, joint, indices[k])
     return out
 ''')
 

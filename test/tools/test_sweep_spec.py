@@ -21,6 +21,7 @@ def test_lists_grids_and_ranges_hold_the_values_they_name():
     assert parse_vary("springs.stiffness=log:1:1000:4").values == pytest.approx((1, 10, 100, 1000))
     assert parse_vary("sensors.seed=range:0:10:3").values == (0, 3, 6, 9)
     assert parse_vary("sensors.seed=9223372036854775807").values == (2 ** 63 - 1,)
+    assert parse_vary("sensors.seed=integers:0:4294967295").law == ("integers", (0, 2 ** 32 - 1))
 
 
 def test_a_pair_key_takes_pairs_between_semicolons_one_number_for_both_or_one_joint():
@@ -84,6 +85,8 @@ def test_blocks_depend_on_the_count_alone_and_cover_it_once():
     ("payload.mass=0.1,,0.2", "an empty value"),
     ("payload.mass=abc", "malformed"),
     ("integrator=lin:1:2:3", "give them as a list"),
+    ("sensors.seed=uniform:0:9", "sensors.seed takes int values: give them as a list (a,b or "
+                                 "a;b), range: or integers:, not uniform:"),
     ("integrator=rk5", "integrator 'rk5' is unknown"),
     ("gravity[0]=1", "gravity is not a per-joint key"),
     ("step_size=lin:0.001:0.003:3", "not a whole number of steps"),

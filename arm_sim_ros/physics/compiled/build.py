@@ -356,7 +356,7 @@ def compilable(dynamics, step, servo: bool = False) -> bool:
     sensed.py, the same on every interface): compiled. `servo`: a continuous servo too (its
     set-points read from K: rollouts, where no interface changes)."""
     values = dynamics.function.__globals__
-    names = capitals(dynamics.source) - {"MIN", "MAX"}
+    names = capitals(set_points(dynamics.source)) - {"MIN", "MAX"}
     return (available() and hasattr(step, "source") and not hasattr(step, "rtol")
             and not any(effect.name == "servo" and effect.acting is None
                         and not (servo and not effect.rate) for effect in dynamics.active)

@@ -10,7 +10,8 @@ uint32 words: SeedSequence's hash of the entropy words into the Philox key
 (distributions.c; numba ships the same tables). test_draws.py holds them equal to numpy's
 draws, tails included. A stream's generator state (DG, a row per stream and joint) is a
 cache: a draw of another block, or one behind the state, starts its block afresh, so a
-draw stays a function of (seed, stream, joint, index) alone.
+draw stays a function of (seed, stream, joint, index) alone. (The compiled path draws with
+these in Python too: sensed.CompiledDraws.)
 """
 from __future__ import annotations
 
@@ -105,47 +106,47 @@ def mulhilo(a, b):
 
 
 @njit(cache=True)
-def philox_block(R):
-    """Philox-4x64-10 of the counter R[4] (then R[5..7]: 0) under the key R[2], R[3], into
-    the buffer R[5..8] (numpy's philox_next: the counter stepped first)."""
-    c0, c1, c2, c3 = R[4], ZERO, ZERO, ZERO
-    k0, k1 = R[2], R[3]
-    for r in range(10):
-        if r > 0:
+def philox_block(R, r):
+    """Philox-4x64-10 of the counter R[r, 4] (then 0, 0, 0) under the key R[r, 2:4], into
+    the buffer R[r, 5:9] (numpy's philox_next: the counter stepped first)."""
+    c0, c1, c2, c3 = R[r, 4], ZERO, ZERO, ZERO
+    k0, k1 = R[r, 2], R[r, 3]
+    for rounds in range(10):
+        if rounds > 0:
             k0 = k0 + PHILOX_W0
             k1 = k1 + PHILOX_W1
         hi0, lo0 = mulhilo(PHILOX_M0, c0)
         hi1, lo1 = mulhilo(PHILOX_M1, c2)
         c0, c1, c2, c3 = hi1 ^ c1 ^ k0, lo1, hi0 ^ c3 ^ k1, lo0
-    R[5], R[6], R[7], R[8] = c0, c1, c2, c3
+    R[r, 5], R[r, 6], R[r, 7], R[r, 8] = c0, c1, c2, c3
 
 
 @njit(cache=True)
-def next_uint64(R):
-    """The next word of the stream whose state is R (numpy's buffer of four per counter)."""
-    if R[9] >= np.uint64(4):
-        R[4] = R[4] + ONE
-        philox_block(R)
-        R[9] = ZERO
-    out = R[5 + R[9]]
-    R[9] = R[9] + ONE
-    return out
+def next_uint64(R, r):
+    """The next word of the stream whose state is R[r] (numpy's buffer of four a counter)."""
+    at = np.int64(R[r, 9])        # (an int64: uint64 + int is a float in numba)
+    if at >= 4:
+        R[r, 4] = R[r, 4] + ONE
+        philox_block(R, r)
+        at = 0
+    R[r, 9] = np.uint64(at + 1)
+    return R[r, 5 + at]
 
 
 @njit(cache=True)
-def next_double(R):
-    return float(next_uint64(R) >> SHIFT11) * (1.0 / 9007199254740992.0)
+def next_double(R, r):
+    return float(next_uint64(R, r) >> SHIFT11) * (1.0 / 9007199254740992.0)
 
 
 @njit(cache=True)
-def next_normal(R):
+def next_normal(R, r):
     """Generator.standard_normal's ziggurat (numpy's random_standard_normal)."""
     while True:
-        r = next_uint64(R)
-        idx = r & BYTE
-        r = r >> SHIFT8
-        sign = r & ONE
-        rabs = (r >> ONE) & U52
+        word = next_uint64(R, r)
+        idx = word & BYTE
+        word = word >> SHIFT8
+        sign = word & ONE
+        rabs = (word >> ONE) & U52
         x = float(rabs) * WI[idx]
         if sign == ONE:
             x = -x
@@ -153,31 +154,31 @@ def next_normal(R):
             return x
         if idx == ZERO:
             while True:
-                xx = -NOR_INV_R * log1p(-next_double(R))
-                yy = -log1p(-next_double(R))
+                xx = -NOR_INV_R * log1p(-next_double(R, r))
+                yy = -log1p(-next_double(R, r))
                 if yy + yy > xx * xx:
                     if ((rabs >> SHIFT8) & ONE) == ONE:
                         return -(NOR_R + xx)
                     return NOR_R + xx
         else:
-            if (FI[idx - 1] - FI[idx]) * next_double(R) + FI[idx] < exp(-0.5 * x * x):
+            if (FI[idx - 1] - FI[idx]) * next_double(R, r) + FI[idx] < exp(-0.5 * x * x):
                 return x
 
 
 @njit(cache=True)
-def normal(R, seed, stream, joint, index):
-    """Draw `index` of (seed, stream, joint): R its stream's cached state (block, draws made
-    in it, key, counter, buffer, position in the buffer)."""
+def normal(R, r, seed, stream, joint, index):
+    """Draw `index` of (seed, stream, joint): R[r] its stream's cached state (block, draws
+    made in it, key, counter, buffer, position in the buffer)."""
     block, at = np.uint64(index // BLOCK), np.uint64(index % BLOCK)
-    if R[0] != block or R[1] > at:
-        R[0], R[1] = block, ZERO
-        R[2], R[3] = philox_key(seed, stream, joint, block)
-        R[4], R[9] = ZERO, np.uint64(4)
-    while R[1] < at:
-        next_normal(R)
-        R[1] = R[1] + ONE
-    R[1] = R[1] + ONE
-    return next_normal(R)
+    if R[r, 0] != block or R[r, 1] > at:
+        R[r, 0], R[r, 1] = block, ZERO
+        R[r, 2], R[r, 3] = philox_key(seed, stream, joint, block)
+        R[r, 4], R[r, 9] = ZERO, np.uint64(4)
+    while R[r, 1] < at:
+        next_normal(R, r)
+        R[r, 1] = R[r, 1] + ONE
+    R[r, 1] = R[r, 1] + ONE
+    return next_normal(R, r)
 '''
 
 

@@ -100,3 +100,12 @@ def settle(sim, keep: bool = True) -> None:
     kernel = getattr(sim, "kernel", None)
     if kernel is not None:
         kernel.settle(sim) if keep else kernel.drop()
+
+
+def acting(sim) -> None:
+    """A control loop's torque acting (dynamics.command) made current where a compiled run
+    holds it (K[0], K[1]); the rest stays in the arrays (nothing to pack again)."""
+    kernel = getattr(sim, "kernel", None)
+    if kernel is not None and kernel.held is not None:
+        K = kernel.held[1]
+        sim.dynamics.command[:] = [float(K[0]), float(K[1])]

@@ -32,11 +32,11 @@ class Kernel:
         import numpy as np
         self.plain = plain        # runs of plain steps (no switches, no driver check)
         # sensors and a control loop acting between steps (sensed.py), or None
-        self.sensed = Sensed(sensing) if sensing is not None and sensing.active else None
+        sensed = sensing is not None and sensing.active
         energy = energy_source(dynamics) if energy is None else energy
-        source, names = module_source(dynamics, step, sensed=self.sensed is not None,
-                                      energy=energy)
+        source, names = module_source(dynamics, step, sensed=sensed, energy=energy)
         self.module = load(source)
+        self.sensed = Sensed(sensing, self.module) if sensed else None
         self.K = constants_of(names, {**dynamics.function.__globals__,
                                       **getattr(step, "constants", {}), **SET_POINTS})
         joint_servo = servo_of(dynamics)       # a continuous servo's set-points: into K
@@ -60,7 +60,7 @@ class Kernel:
         if (self.held is None or sim.state is not self.last) and not self.hold(sim):
             return False
         run, K, more, _ = self.held
-        self.given(K)
+        self.given(sim, K)
         self.F[4] = 0.0
         done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
                                      self.F, K, self.C, 1, self.T, *more)
@@ -86,7 +86,7 @@ class Kernel:
             self.record(sim, 0)
             return 1, max(largest, abs(self.residual(sim)))
         run, K, more, _ = self.held
-        self.given(K)
+        self.given(sim, K)
         self.F[4] = largest
         done, code, self.sound = run(self.y, self.z, self.L, self.O, self.G, self.S, self.I,
                                      self.F, K, self.C, left, self.T, *more)
@@ -115,7 +115,7 @@ class Kernel:
         if len(self.T):
             self.T[row] = (*sim.state[:4], *sim.joint_torque())
 
-    def given(self, K) -> None:
+    def given(self, sim, K) -> None:
         """The command given (and a control loop's inputs) into K before a compiled call; under
         a loop K holds the torque acting, which the loop sets."""
         for at, setpoint, k in self.setpoints:
@@ -123,8 +123,8 @@ class Kernel:
         if self.sensed is None:
             K[0], K[1] = self.command
         else:
-            self.sensed.refresh()
-            if self.sensed.loop is None:
+            self.sensed.refresh(sim.sensing)
+            if not self.sensed.looped:
                 K[0], K[1] = self.command
 
     def hold(self, sim) -> bool:
@@ -134,9 +134,10 @@ class Kernel:
         books = sim.accuracy
         if sim.diverged:
             return False
-        if self.plain and smooth(books) and (self.sensed is None or self.sensed.ready(books)):
+        if self.plain and smooth(books) and (self.sensed is None or
+                                             self.sensed.ready(sim.sensing, books)):
             if self.sensed is not None:
-                self.sensed.pack(self.K)
+                self.sensed.pack(sim.sensing, self.K)
             run = (self.module.run_books, self.K, self.sensed.more if self.sensed else ())
         elif self.sensed is not None or self.switched is None or (
                 run := self.switched.ready(self, sim, books)) is None:
@@ -144,6 +145,11 @@ class Kernel:
         pack(self, sim, books)
         self.held, self.last, self.sound = (*run, books), sim.state, sim.steps
         return True
+
+    def reading(self, sim):
+        """The sensors' reading now taken in the arrays a run holds (Sensed.read), or None:
+        Python's (settled)."""
+        return None if self.held is None or self.sensed is None else self.sensed.read(sim)
 
     def settle(self, sim) -> None:
         """The books the arrays hold back into Python's objects (nothing when none)."""
@@ -153,7 +159,7 @@ class Kernel:
         self.held = None
         unpack(self, sim, books, self.sound)
         if self.sensed is not None:
-            self.sensed.unpack(K)
+            self.sensed.unpack(sim.sensing, K)
         if run is not self.module.run_books:
             self.switched.landed(self, sim, books)
 

@@ -38,8 +38,8 @@ class Stack:
     def __init__(self, runs: list[Built]):
         self.runs = runs
         kernels = [run.sim.kernel for run in runs]
-        for kernel in kernels:
-            kernel.given(kernel.held[1])
+        for run, kernel in zip(runs, kernels):
+            kernel.given(run.sim, kernel.held[1])
         self.arrays = [np.stack([getattr(k, name) for k in kernels]) for name in KERNEL_ARRAYS]
         self.K = np.stack([k.held[1] for k in kernels])
         self.C = np.stack([k.C for k in kernels])

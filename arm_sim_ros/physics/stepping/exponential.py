@@ -98,7 +98,6 @@ def _velocities(extra: int, stage: str) -> list[str]:
     return [f"    v{j}_{stage} = v{j}_{stage} + h * ({pulls(j)})" for j in (1, 2)]
 
 
-@lru_cache(maxsize=128)
 def exponential_step_source(channels: int, extra: int, name: str = "step") -> str:
     """The straight-line source of the exponential RK4 step (step(f, y, h); reads the
     decay rates LAM0, LAM1 ... and COEFFICIENTS = exponential_rk4 from its globals, and

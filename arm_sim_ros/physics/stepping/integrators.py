@@ -18,9 +18,10 @@ Two small generalisations cover every method offered here:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from fractions import Fraction
 from math import lcm, nan
+
+from .generated import source_code
 
 F = Fraction
 
@@ -205,13 +206,6 @@ def final_terms(tableau: ButcherTableau, channels: int, position_b, b, extra: in
             for n, (x, k) in enumerate(zip(state_names(extra, channels), slope_names(extra, channels)))]
 
 
-@lru_cache(maxsize=512)
-def source_code(source: str, name: str):
-    """compile(source, name) once per text: every simulator of a scene structure (a sweep
-    builds thousands) execs the same generated code."""
-    return compile(source, name, "exec")
-
-
 def exec_source(source: str, name: str, namespace: dict):
     exec(source_code(source, name), namespace)
     return namespace
@@ -225,33 +219,17 @@ def compile_step(tableau: ButcherTableau, channels: int = 0, rtol: float = DEFAU
     matter for embedded pairs."""
     if tableau.adaptive:
         return _compile_adaptive(tableau, channels, rtol, atol, extra)
-    source = fixed_step_source(tableau, channels, extra)
-    step = exec_source(source, f"<{tableau.name} step, {extra} extra, {channels} channels>",
-                       {})["step"]
-    step.source = source
-    return step
-
-
-def fixed_step_source(tableau: ButcherTableau, channels: int, extra: int) -> str:
-    """The straight-line source of a fixed-step method's step(f, y, h), written once per
-    method and state in a process (keyed by the tableau itself: its hash sums fractions)."""
-    key = (id(tableau), channels, extra)
-    if key not in _FIXED:
-        _FIXED[key] = (tableau, _fixed_step_source(tableau, channels, extra))
-    return _FIXED[key][1]
-
-
-_FIXED: dict = {}      # (id of the tableau, channels, extra): (the tableau, its step's source)
-
-
-def _fixed_step_source(tableau: ButcherTableau, channels: int, extra: int) -> str:
     state = state_names(extra, channels)
     lines = ["def step(f, y, h):", f"    {', '.join(state)}, = y"]
     lines += stage_lines(tableau, channels, first_given=False, extra=extra)
     final = [combination(x, w, terms)
              for w, x, terms in final_terms(tableau, channels, tableau.pos_b, tableau.b, extra)]
     lines.append(f"    return ({', '.join(final)},)")
-    return "\n".join(lines) + "\n"
+    source = "\n".join(lines) + "\n"
+    step = exec_source(source, f"<{tableau.name} step, {extra} extra, {channels} channels>",
+                       {})["step"]
+    step.source = source
+    return step
 
 
 # Step-size controller (Hairer, Norsett & Wanner, II.4): safety factor and growth limits.

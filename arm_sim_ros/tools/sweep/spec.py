@@ -20,6 +20,7 @@ from ...physics.scene import FIELD_KINDS, MAPPINGS, SceneError, parse_value
 KEY = re.compile(r"^(?P<key>[A-Za-z_][\w.]*)(?:\[(?P<joint>[01])\])?$")
 GRIDS = ("lin", "log", "range")
 DISTRIBUTIONS = ("uniform", "normal", "lognormal", "integers")
+WHOLE = ("range", "integers")      # the SPECs of whole numbers
 MAX_GRID = 100_000            # values one grid key may take
 PAIR_KINDS = ("pair", "float_or_pair", "pair_or_none")
 # keys whose one value may itself hold commas: a list of them is separated by ';'
@@ -96,9 +97,11 @@ def parse_vary(text: str) -> Vary:
             raise SceneError(f"{field} is not a per-joint key: vary it as {field}")
         head, colon, rest = spec.partition(":")
         if colon and head in GRIDS + DISTRIBUTIONS:
-            if kind not in ("float",) + PAIR_KINDS:
+            whole = kind == "int"      # a seed, a count: whole numbers only
+            if kind not in ("float", "int") + PAIR_KINDS or whole and head not in WHOLE:
                 raise SceneError(f"{field} takes {'a name' if kind in ('str', 'choice') else kind}"
-                                 f" values: give them as a list (a,b or a;b), not {head}:")
+                                 f" values: give them as a list (a,b or a;b)"
+                                 f"{', range: or integers:' if whole else ''}, not {head}:")
             numbers = [_endpoint(field, joint, part) for part in rest.split(":")]
             if head in GRIDS:
                 return Vary(text, key_text, field, joint, values=_grid(head, numbers))

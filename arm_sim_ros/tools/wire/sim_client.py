@@ -50,10 +50,15 @@ class SimulationClient:
                                                    1000))
 
     def wait_for_node(self) -> None:
-        self._until(lambda: all(service.matched() for service in self.services.values())
-                    and all(msg.matched(w) for w in self.commands.values())
-                    and msg.matched(self.joint_states) and msg.matched(self.feedback),
-                    "the node's services and topics")
+        self._until(lambda: not self.unmatched(), "the node's services and topics")
+
+    def unmatched(self) -> list:
+        """The node's services and topics this client has not matched yet, by name."""
+        return ([name for name, service in self.services.items() if not service.matched()]
+                + [field for field, writer in self.commands.items() if not msg.matched(writer)]
+                + [name for name, endpoint in (("joint_states", self.joint_states),
+                                               ("feedback", self.feedback))
+                   if not msg.matched(endpoint)])
 
     def call(self, service: str, **fields):
         """The reply to one request (the service's response type)."""
