@@ -33,7 +33,7 @@ def test_the_default_scene_is_release_and_its_first_run_logs_no_warning():
     assert core.config.scene.name == "release"
     assert said(log, "warning") == []
     assert [m for m in said(log, "info") if "sub-steps" in m] == [
-        "local error 3.39e-05 per s (scaled) for tolerance 5e-05 (aiming at half): each 0.01 s "
+        "local error 4.03e-05 per s (scaled) for tolerance 5e-05 (aiming at half): each 0.01 s "
         "step is taken as 3 sub-steps (at t = 1.940000 s)"]
 
 

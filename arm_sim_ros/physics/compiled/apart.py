@@ -38,6 +38,8 @@ spec = importlib.util.spec_from_file_location(name, path)
 module = importlib.util.module_from_spec(spec)
 sys.modules[name] = module
 spec.loader.exec_module(module)
+from arm_sim_ros.physics.compiled.entries import check_entries
+check_entries(module)        # its files sealed as this process reads them (entries.py)
 getattr(module, function).compile(signature)
 """
 _here = threading.local()    # compiles under way in this thread, in this process

@@ -63,6 +63,7 @@ def set_aside(path: str, why) -> None:
     cache = directory.removesuffix(f"{os.sep}__pycache__")
     if cache not in SAID:
         SAID.add(cache)
+        why = " ".join(str(why).split())        # LLVM's errors run over several lines
         print(f"arm_sim_ros: the kernel cache {cache} held a damaged entry ({name}: {why}; "
               "any more alike are not named); set aside as *.damaged and compiled again",
               file=sys.stderr)
