@@ -29,7 +29,6 @@ import time
 import numpy as np
 
 HERE = os.path.abspath(__file__)
-DOMAIN = 97
 
 
 def config(tag: str) -> str:
@@ -37,9 +36,10 @@ def config(tag: str) -> str:
     return msg.loopback_config(tag)
 
 
-def participant(tag: str):
+def participant(tag: str, domain: int):
+    # a domain of each pass's own: a process keeps one configuration a domain id (messages.py)
     from arm_sim_ros.node.wire import messages as msg
-    return msg.make_participant(DOMAIN, config(tag))
+    return msg.make_participant(domain, config(tag))
 
 
 def endpoints(p, write: str, read: str):
@@ -64,10 +64,10 @@ def state(k: int):
 
 # --- roles, each in a process of its own ---------------------------------------------------
 
-def echo(tag: str) -> None:
+def echo(tag: str, domain: int) -> None:
     """Answer every JointState on rt/ping with one on rt/pong, until stdin closes."""
     from cyclonedds.util import duration
-    writer, reader, ready = endpoints(participant(tag), "rt/pong", "rt/ping")
+    writer, reader, ready = endpoints(participant(tag, domain), "rt/pong", "rt/ping")
     print("ready", flush=True)
     while True:
         ready.wait(duration(seconds=1))
@@ -79,10 +79,12 @@ def echo(tag: str) -> None:
 class PingPong:
     """This process's end of the ping-pong, its partner in a process of its own."""
 
-    def __init__(self, tag: str):
+    def __init__(self, tag: str, domain: int):
         from arm_sim_ros.node.wire import messages as msg
-        self.writer, self.reader, self.ready = endpoints(participant(tag), "rt/ping", "rt/pong")
-        self.partner = subprocess.Popen([sys.executable, HERE, "--role", "echo", "--tag", tag],
+        self.writer, self.reader, self.ready = endpoints(participant(tag, domain), "rt/ping",
+                                                          "rt/pong")
+        self.partner = subprocess.Popen([sys.executable, HERE, "--role", "echo", "--tag", tag,
+                                         "--domain", str(domain)],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         self.partner.stdout.readline()
         while not (msg.matched(self.writer) and msg.matched(self.reader)):
@@ -93,10 +95,12 @@ class PingPong:
         from cyclonedds.util import duration
         done, started = 0, time.perf_counter()
         while (elapsed := time.perf_counter() - started) < seconds:
-            self.writer.write(state(self.k))
+            ping = state(self.k)
+            self.writer.write(ping)
             self.k += 1
             while not [s for s in self.reader.take(N=10) if hasattr(s, "header")]:
-                self.ready.wait(duration(seconds=1))
+                if not self.ready.wait(duration(seconds=1)):
+                    self.writer.write(ping)    # a second of nothing: lost, sent again
             done += 1
         return done / elapsed
 
@@ -190,7 +194,8 @@ def measure(args, domain: int) -> dict:
     all of them), best of the rounds after a first that warms up."""
     import tempfile
     with tempfile.TemporaryDirectory() as directory:
-        rows = {"ping-pong (round trips/s)": PingPong(f"bench_lockstep_{os.getpid()}_{domain}"),
+        tag = f"bench_lockstep_{os.getpid()}_{domain}"
+        rows = {"ping-pong (round trips/s)": PingPong(tag, domain),
                 "lockstep, /clock off": Controlled(domain + 1, lockstep_node(False)),
                 "lockstep, /clock on": Controlled(domain + 2, lockstep_node(True)),
                 "run() (fixture)": Fixture(domain + 3, directory)}
@@ -219,7 +224,7 @@ def main(argv=None) -> int:
     parser.add_argument("--domain", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.role == "echo":
-        echo(args.tag)
+        echo(args.tag, args.domain)
         return 0
     if args.role == "controller":
         controller(args.domain)
