@@ -43,7 +43,7 @@ def private_domain() -> int:
     chosen = os.environ.get("ARM_SIM_TEST_DOMAIN")
     if chosen:
         return int(chosen)
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:]
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")[2:]    # else apart by process id
     offset = int(worker) * 10 if worker.isdigit() else os.getpid() % len(DOMAINS)
     return DOMAINS[(offset + next(_taken)) % len(DOMAINS)]
 
@@ -118,20 +118,22 @@ class WireArm:
         whole run so far."""
         from cyclonedds.util import duration
         ticks = round(seconds * self.publish_rate)
-        last = max(self.heard.states)
+        end = max(self.heard.states) + ticks * round(1e9 / self.publish_rate)
         reply = self.client.services["step_simulation"].ask(steps=ticks)
         seen, quiet_since = len(self.heard.states), time.monotonic()
         # Blocked on the reply, the states waiting in the readers (no work of ours a tick):
         # a look at them now and then tells a loop that goes on from one gone silent. A
-        # state answered and not yet followed is the node's time (a first tick compiles the
-        # scene's kernels: tens of seconds), not the controller's.
+        # state answered and not yet followed, or the run's last state heard, is the node's
+        # time (a first tick compiles the scene's kernels: tens of seconds), not the
+        # controller's.
         while (answer := reply()) is None:
             self._replied.wait(duration(seconds=DRAIN))
             self.heard.take()
             now = time.monotonic()
+            latest = max(self.heard.states)
             if len(self.heard.states) != seen:
                 seen, quiet_since = len(self.heard.states), now
-            elif max(self.heard.states) in self.heard.answers:
+            elif latest in self.heard.answers or latest >= end:
                 self._alive()
                 if now - quiet_since > START_TIMEOUT:
                     raise ControllerError(self._stuck(), self.trace())
@@ -141,11 +143,18 @@ class WireArm:
         if answer.result.result != 1:
             raise ControllerError(f"the node refused to step: {answer.result.error_message}",
                                   self.trace())
-        end = last + ticks * round(1e9 / self.publish_rate)
+        # Every state up to the last is here, and the answer each before it had (the node
+        # ticked on it, so it was sent): samples of three topics arrive in any order.
         deadline = time.monotonic() + self.silence
-        while max(self.heard.states, default=-1) < end and time.monotonic() < deadline:
-            self.heard.take()                  # the last states are on their way
+        while time.monotonic() < deadline and not self._whole(end):
+            self.heard.take()
             time.sleep(0.0002)
+        return self.trace()
+
+    def _whole(self, end: int) -> bool:
+        heard = self.heard
+        return max(heard.states, default=-1) >= end and all(
+            stamp in heard.answers for stamp in heard.states if stamp < end)
         return self.trace()
 
     def _first_state(self, deadline: float) -> bool:
