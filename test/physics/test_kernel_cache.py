@@ -55,7 +55,12 @@ def test_a_damaged_entry_is_set_aside_and_compiled_again_in_one_line(cache, caps
     capsys.readouterr()
     assert fresh(source).quadruple(1.5) == 6.0           # the later run: the right answer
     lines = capsys.readouterr().err.splitlines()
-    assert len(lines) == 1 and "held a damaged entry" in lines[0] and "set aside" in lines[0]
+    damaged = [line for line in lines if "damaged" in line]
+    assert len(damaged) == 1 and "held a damaged entry" in damaged[0] and "set aside" in damaged[0]
+    # the rest, if the compile again took over 10 s: the compile pulse of an earlier test's
+    # command line or node in this process (cache.Pulse), saying it goes on
+    assert all("still compiling this scene's kernels" in line for line in lines
+               if line not in damaged)
     assert list(cache.rglob("*.damaged"))
     assert fresh(source).quadruple(1.5) == 6.0           # and the one after: rebuilt, quiet
     assert capsys.readouterr().err == ""
